@@ -1,0 +1,202 @@
+//! `radcast`: offline radiosity solves and benchmarks from the command line.
+
+use anyhow::{Context, bail};
+use clap::{Args, Parser, Subcommand};
+use solver::form_factors::MAX_RAYS_PER_PAIR;
+use solver::{FormFactorSettings, Method, PatchTarget, Progress, SolveReport, SolveRequest, SolverSettings, solve_file};
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+/// Radiosity for Wavefront OBJ + MTL scenes (Kd = reflectance, Ke = emitted radiosity).
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Solve a scene and print a summary (or JSON).
+    Solve {
+        /// The OBJ file.
+        scene: PathBuf,
+        #[command(flatten)]
+        settings: Settings,
+        /// Print one JSON object on stdout instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time every stage at several patch counts and print a Markdown table of medians.
+    Bench {
+        /// The OBJ file.
+        scene: PathBuf,
+        /// Patch counts to run, comma-separated.
+        #[arg(long, value_delimiter = ',', default_value = "150,600,2500,10000")]
+        counts: Vec<usize>,
+        /// Runs per count; the table shows medians.
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+        #[command(flatten)]
+        settings: Settings,
+    },
+}
+
+#[derive(Args, Clone)]
+struct Settings {
+    /// Target number of patches.
+    #[arg(long, default_value_t = 1000, conflicts_with = "patch_size")]
+    patches: usize,
+    /// Target patch edge length in scene units (instead of --patches).
+    #[arg(long)]
+    patch_size: Option<f64>,
+    /// Solver: jacobi, gauss-seidel, progressive or gmres.
+    #[arg(long, default_value = "gmres")]
+    method: Method,
+    /// Stop when the relative residual is at most this.
+    #[arg(long, default_value_t = 1e-6)]
+    tolerance: f64,
+    /// Give up after this many iterations.
+    #[arg(long, default_value_t = 100_000)]
+    max_iterations: usize,
+    /// SOR relaxation factor for gauss-seidel, in (0, 2).
+    #[arg(long, default_value_t = 1.0)]
+    omega: f64,
+    /// Shadow rays per far patch pair (near pairs get more).
+    #[arg(long, default_value_t = FormFactorSettings::default().rays_per_pair)]
+    rays: u32,
+}
+
+impl Settings {
+    fn request(&self) -> anyhow::Result<SolveRequest> {
+        let patches = match self.patch_size {
+            Some(size) if size.is_finite() && size > 0.0 => PatchTarget::EdgeLength(size),
+            Some(size) => bail!("--patch-size must be a positive length, got {size}"),
+            None if self.patches == 0 => bail!("--patches must be at least 1"),
+            None => PatchTarget::Count(self.patches),
+        };
+        if !(self.tolerance > 0.0 && self.tolerance < 1.0) {
+            bail!("--tolerance must be in (0, 1), got {}", self.tolerance);
+        }
+        if !(self.omega > 0.0 && self.omega < 2.0) {
+            bail!("--omega must be in (0, 2), got {}", self.omega);
+        }
+        if self.rays == 0 || self.rays > MAX_RAYS_PER_PAIR {
+            bail!("--rays must be in 1..={MAX_RAYS_PER_PAIR}, got {}", self.rays);
+        }
+        Ok(SolveRequest {
+            patches,
+            form_factors: FormFactorSettings { rays_per_pair: self.rays },
+            solver: SolverSettings {
+                method: self.method,
+                tolerance: self.tolerance,
+                max_iterations: self.max_iterations,
+                relaxation: self.omega,
+            },
+            ..SolveRequest::default()
+        })
+    }
+}
+
+/// Prints a progress line to stderr at most once a second, after the first second.
+struct ProgressPrinter {
+    start: Instant,
+    last: Mutex<Instant>,
+}
+
+impl ProgressPrinter {
+    fn new() -> Self {
+        let now = Instant::now();
+        ProgressPrinter { start: now, last: Mutex::new(now) }
+    }
+
+    fn report(&self, progress: Progress) {
+        let Ok(mut last) = self.last.try_lock() else { return };
+        if last.elapsed() < Duration::from_secs(1) {
+            return;
+        }
+        *last = Instant::now();
+        let t = self.start.elapsed().as_secs_f64();
+        match progress {
+            Progress::FormFactors { done, total } => eprintln!("[{t:6.1}s] form factors {:5.1}%", 100.0 * done as f64 / total as f64),
+            Progress::Solve { iteration, residual } => eprintln!("[{t:6.1}s] solve: iteration {iteration}, residual {residual:.3e}"),
+        }
+    }
+}
+
+fn main() -> anyhow::Result<()> {
+    match Cli::parse().command {
+        Command::Solve { scene, settings, json } => {
+            let request = settings.request()?;
+            let printer = ProgressPrinter::new();
+            let solved = solve_file(&scene, &request, &|p| printer.report(p))?;
+            let report = &solved.report;
+            if report.skipped_faces > 0 {
+                eprintln!("warning: {}: skipped {} zero-area faces", scene.display(), report.skipped_faces);
+            }
+            if !report.converged {
+                eprintln!(
+                    "warning: not converged after {} iterations (residual {:.3e} > tolerance {:.1e})",
+                    report.iterations, report.residual, report.tolerance
+                );
+            }
+            if json {
+                println!("{}", serde_json::to_string(report).context("serialising the report")?);
+            } else {
+                print_summary(&scene, report);
+            }
+        }
+        Command::Bench { scene, counts, repeat, settings } => bench(&scene, &counts, repeat.max(1), &settings)?,
+    }
+    Ok(())
+}
+
+fn print_summary(scene: &std::path::Path, r: &SolveReport) {
+    let s = &r.seconds;
+    println!("scene       {} ({} objects, {} triangles)", scene.display(), r.objects.len(), r.triangles);
+    println!("patches     {}  ({} shadow rays)", r.patches, r.rays);
+    println!("solver      {}: {} iterations, residual {:.2e}{}", r.method, r.iterations, r.residual, if r.converged { "" } else { " (NOT converged)" });
+    println!(
+        "seconds     load {:.3}  mesh {:.3}  form factors {:.3}  solve {:.3}  total {:.3}",
+        s.load, s.mesh, s.form_factors, s.solve, s.total
+    );
+    println!("{:<16} {:>14}  mean radiosity W/m^2 (r, g, b)", "object", "area");
+    for o in &r.objects {
+        let [red, green, blue] = o.radiosity;
+        println!("{:<16} {:>14.6e}  {red:10.4} {green:10.4} {blue:10.4}", o.name, o.area);
+    }
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[values.len() / 2]
+}
+
+fn bench(scene: &std::path::Path, counts: &[usize], repeat: usize, settings: &Settings) -> anyhow::Result<()> {
+    println!("`radcast bench {} --counts {} --repeat {repeat} --method {}` ({} threads), medians of {repeat} runs:\n",
+        scene.display(),
+        counts.iter().map(ToString::to_string).collect::<Vec<_>>().join(","),
+        settings.method,
+        rayon::current_num_threads());
+    println!("| patches | load s | mesh s | form factors s | solve s | total s | iterations | rays |");
+    println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for &count in counts {
+        let request = Settings { patches: count, patch_size: None, ..settings.clone() }.request()?;
+        let mut runs = Vec::new();
+        for _ in 0..repeat {
+            runs.push(solve_file(scene, &request, &solver::no_progress)?.report);
+        }
+        let stage = |f: fn(&SolveReport) -> f64| median(&mut runs.iter().map(f).collect::<Vec<_>>());
+        let (load, mesh, ff, solve, total) = (
+            stage(|r| r.seconds.load),
+            stage(|r| r.seconds.mesh),
+            stage(|r| r.seconds.form_factors),
+            stage(|r| r.seconds.solve),
+            stage(|r| r.seconds.total),
+        );
+        let last = runs.last().context("at least one run")?;
+        println!("| {} | {load:.4} | {mesh:.4} | {ff:.4} | {solve:.4} | {total:.4} | {} | {} |", last.patches, last.iterations, last.rays);
+    }
+    Ok(())
+}

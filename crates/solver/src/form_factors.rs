@@ -1,0 +1,268 @@
+//! Form factors between patches, and the [`Transport`] interface the solvers iterate on.
+//!
+//! `F_ij` (the fraction of light leaving patch `i` that reaches patch `j`, equivalently the
+//! share of `j`'s radiosity that `i` gathers) is the receiver-area average of the analytic
+//! point-to-polygon form factor to `j`, times the fraction of shadow rays between the two
+//! patches that no other face blocks. The quadrature on the receiver is refined for near pairs,
+//! where the integrand varies fastest; far pairs use the centroid.
+
+use crate::Progress;
+use crate::geometry::point_to_polygon_form_factor;
+use crate::mesh::{Mesh, Patch};
+use crate::scene::Rgb;
+use crate::visibility::Occluders;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+
+/// How light moves between patches: what every solver needs from form factors. A dense matrix
+/// implements it today; a hierarchical link list can implement it without touching the solvers.
+pub trait Transport: Sync {
+    /// Number of patches (rows and columns).
+    fn patch_count(&self) -> usize;
+
+    /// Irradiance gathered by patch `i` from `radiosity`: `sum_j F_ij B_j`.
+    fn gather_row(&self, i: usize, radiosity: &[Rgb]) -> Rgb;
+
+    /// Calls `visit(i, F_ij)` for every receiver `i` with a non-zero factor from source `j`.
+    fn for_each_in_column(&self, j: usize, visit: &mut dyn FnMut(usize, f64));
+
+    /// `out_i = sum_j F_ij B_j` for every `i`, in parallel.
+    fn gather(&self, radiosity: &[Rgb], out: &mut [Rgb]) {
+        out.par_iter_mut().enumerate().for_each(|(i, o)| *o = self.gather_row(i, radiosity));
+    }
+}
+
+/// Accuracy knobs of the form-factor computation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FormFactorSettings {
+    /// Shadow rays between a far pair of patches; near pairs get this many per receiver
+    /// quadrature cell (at most [`MAX_RAYS_PER_PAIR`]).
+    pub rays_per_pair: u32,
+}
+
+impl Default for FormFactorSettings {
+    fn default() -> Self {
+        FormFactorSettings { rays_per_pair: 2 }
+    }
+}
+
+/// Upper bound on the shadow rays one pair of patches gets.
+pub const MAX_RAYS_PER_PAIR: u32 = 64;
+
+/// Sources farther than this many receiver radii are integrated at the receiver's centroid;
+/// that rule's relative error falls like (radius / distance)^2 (about 0.5% at 8 radii).
+const NEAR_FIELD_RADII: f64 = 8.0;
+/// Cells of a near-pair quadrature are about `1 / QUADRATURE_DENSITY` of the gap they look across.
+const QUADRATURE_DENSITY: f64 = 1.5;
+/// The finest rule for one pair (`4 * 6^2` points on a quad), reached by touching patches.
+const MAX_PAIR_LEVEL: u32 = 6;
+
+/// The quadrature level (see [`Polygon::for_each_quadrature_point`]) receiver `p` needs for
+/// source `q`: `None` in the far field (the centroid serves), else finer the smaller the gap
+/// between `p`'s centroid and the nearest the source can come (zero for touching patches).
+///
+/// [`Polygon::for_each_quadrature_point`]: crate::geometry::Polygon::for_each_quadrature_point
+fn near_pair_level(p: &Patch, q: &Patch) -> Option<u32> {
+    let distance = p.centroid.distance(q.centroid);
+    if distance >= NEAR_FIELD_RADII * p.radius {
+        return None;
+    }
+    let gap = distance - q.radius;
+    let level = if gap <= 0.0 { MAX_PAIR_LEVEL } else { ((QUADRATURE_DENSITY * p.radius / gap).ceil() as u32).clamp(1, MAX_PAIR_LEVEL) };
+    Some(level)
+}
+
+/// Shadow rays between two patches: more for pairs that are near against their size, where
+/// visibility varies most across the pair. Symmetric in the pair.
+fn rays_for_pair(p: &Patch, q: &Patch, settings: &FormFactorSettings) -> u32 {
+    let distance = p.centroid.distance(q.centroid).max(f64::MIN_POSITIVE);
+    let closeness = ((2.0 * p.radius.max(q.radius) / distance).ceil() as u32).clamp(1, 4);
+    (settings.rays_per_pair.max(1) * closeness * closeness).min(MAX_RAYS_PER_PAIR)
+}
+
+/// True when each patch has part of itself strictly in front of the other: otherwise no light
+/// passes between them in either direction (surfaces are one-sided).
+fn mutually_facing(p: &Patch, q: &Patch) -> bool {
+    let tolerance = 1e-12 * (p.radius + q.radius);
+    let in_front = |of: &Patch, other: &Patch| other.polygon.corners().iter().any(|c| (*c - of.centroid).dot(of.normal) > tolerance);
+    in_front(p, q) && in_front(q, p)
+}
+
+/// Marks a pair that cannot exchange light at all in the clear-ray matrix (counts are at most
+/// [`MAX_RAYS_PER_PAIR`]).
+const NOT_FACING: u8 = u8::MAX;
+
+/// SplitMix64 (Steele, Lea, Flood 2014): a well-mixed hash of the pair, so the sample pattern
+/// is deterministic yet decorrelated between pairs.
+fn splitmix64(mut x: u64) -> u64 {
+    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    x ^ (x >> 31)
+}
+
+/// The k-th point of Roberts' R2 sequence, rotated by `offset` (Cranley-Patterson), kept off the
+/// patch border so that a ray never starts on a shared edge.
+fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
+    // Roberts 2018, "The Unreasonable Effectiveness of Quasirandom Sequences": 1/phi_2, 1/phi_2^2.
+    const A1: f64 = 0.754_877_666_246_692_7;
+    const A2: f64 = 0.569_840_290_998_053_2;
+    let (u0, v0) = ((offset >> 11) as f64 / (1u64 << 53) as f64, (offset & 0xFFFF_FFFF) as f64 / 4_294_967_296.0);
+    let inset = |x: f64| 1e-3 + (1.0 - 2e-3) * x.fract();
+    (inset(u0 + k as f64 * A1), inset(v0 + k as f64 * A2))
+}
+
+/// How many of `rays` segments between `p` and `q` that nothing blocks, as a hit count.
+fn clear_rays(p: &Patch, q: &Patch, pair: (usize, usize), rays: u32, occluders: &Occluders) -> u32 {
+    let seed = splitmix64(((pair.0 as u64) << 32) | pair.1 as u64);
+    let (seed_p, seed_q) = (seed, splitmix64(seed));
+    (0..rays)
+        .filter(|&k| {
+            let (u, v) = stratified_uv(k, seed_p);
+            let (s, t) = stratified_uv(k, seed_q);
+            occluders.segment_is_clear(p.polygon.point_at(u, v), q.polygon.point_at(s, t), [p.face, q.face])
+        })
+        .count() as u32
+}
+
+/// Unoccluded form factor from receiver `p` to source `q`: the area average over `p` of the
+/// analytic point-to-polygon factor, with the receiver's quadrature `level`.
+fn unoccluded_form_factor(p: &Patch, q: &Patch, level: u32) -> f64 {
+    let mut sum = 0.0;
+    p.polygon.for_each_quadrature_point(level, |x, weight| sum += weight * point_to_polygon_form_factor(x, p.normal, &q.polygon, q.normal));
+    sum
+}
+
+/// Copies each `m[j][i]` (j < i) to `m[i][j]` in cache-sized blocks.
+fn mirror_upper_triangle(m: &mut [u8], n: usize) {
+    const BLOCK: usize = 64;
+    for bi in (0..n).step_by(BLOCK) {
+        for bj in (0..=bi).step_by(BLOCK) {
+            for i in bi..(bi + BLOCK).min(n) {
+                for j in bj..(bj + BLOCK).min(i) {
+                    m[i * n + j] = m[j * n + i];
+                }
+            }
+        }
+    }
+}
+
+/// All `n^2` form factors in one row-major f32 matrix: the baseline, exact up to quadrature and
+/// ray sampling, and quadratic in time and memory.
+pub struct DenseFormFactors {
+    n: usize,
+    values: Vec<f32>,
+    /// Shadow rays cast while computing.
+    pub rays_cast: u64,
+}
+
+impl DenseFormFactors {
+    /// Bytes the matrix for `n` patches needs (plus `n^2` bytes of scratch while computing).
+    pub fn memory_bytes(n: usize) -> u64 {
+        (n as u64).pow(2) * std::mem::size_of::<f32>() as u64
+    }
+
+    /// Computes every form factor of `mesh`, reporting rows done through `progress`.
+    pub fn compute(mesh: &Mesh, occluders: &Occluders, settings: &FormFactorSettings, progress: &(dyn Fn(Progress) + Sync)) -> Self {
+        let patches = &mesh.patches;
+        let n = patches.len();
+        let rows_done = AtomicUsize::new(0);
+        let report = || {
+            let done = rows_done.fetch_add(1, Ordering::Relaxed) + 1;
+            if done % 64 == 0 || done == 2 * n {
+                progress(Progress::FormFactors { done, total: 2 * n });
+            }
+        };
+
+        // Pass 1: visibility is symmetric, so rays are cast once per unordered pair (i < j) and
+        // stored as counts of clear rays, then mirrored so pass 2 reads rows sequentially.
+        let rays_cast = AtomicU64::new(0);
+        let mut clear = vec![NOT_FACING; n * n];
+        clear.par_chunks_mut(n.max(1)).enumerate().for_each(|(i, row)| {
+            let mut cast = 0u64;
+            for j in i + 1..n {
+                let (p, q) = (&patches[i], &patches[j]);
+                if mutually_facing(p, q) {
+                    let rays = rays_for_pair(p, q, settings);
+                    row[j] = clear_rays(p, q, (i, j), rays, occluders) as u8;
+                    cast += rays as u64;
+                }
+            }
+            rays_cast.fetch_add(cast, Ordering::Relaxed);
+            report();
+        });
+        mirror_upper_triangle(&mut clear, n);
+
+        // Pass 2: row i integrates its receiver's view: far sources at the centroid, near ones
+        // with their own finer rule. The centroid's view of all sources together is exact, so
+        // the far sources are rescaled to keep that total: a closed, unoccluded enclosure sums
+        // to one on every row, which bright scenes need.
+        let mut values = vec![0f32; n * n];
+        values.par_chunks_mut(n.max(1)).enumerate().for_each(|(i, row)| {
+            let p = &patches[i];
+            let clear_row = &clear[i * n..(i + 1) * n];
+            let mut near = Vec::new();
+            let (mut far_centroid, mut near_centroid, mut near_fine) = (0.0, 0.0, 0.0);
+            for (j, value) in row.iter_mut().enumerate() {
+                if clear_row[j] == NOT_FACING || i == j {
+                    continue;
+                }
+                let q = &patches[j];
+                let centroid = unoccluded_form_factor(p, q, 0);
+                match near_pair_level(p, q) {
+                    Some(level) => {
+                        let fine = unoccluded_form_factor(p, q, level);
+                        (near_centroid, near_fine) = (near_centroid + centroid, near_fine + fine);
+                        near.push(j);
+                        *value = fine as f32;
+                    }
+                    None => {
+                        far_centroid += centroid;
+                        *value = centroid as f32;
+                    }
+                }
+            }
+            let far_scale = if far_centroid > 0.0 { ((far_centroid + near_centroid - near_fine) / far_centroid).max(0.0) } else { 1.0 };
+            let mut near = near.into_iter().peekable();
+            for (j, value) in row.iter_mut().enumerate() {
+                if *value == 0.0 {
+                    continue;
+                }
+                let scale = if near.next_if_eq(&j).is_some() { 1.0 } else { far_scale };
+                let visible = clear_row[j] as f64 / rays_for_pair(p, &patches[j], settings) as f64;
+                *value = (*value as f64 * scale * visible) as f32;
+            }
+            report();
+        });
+        DenseFormFactors { n, values, rays_cast: rays_cast.into_inner() }
+    }
+
+    /// `F_ij`.
+    pub fn get(&self, i: usize, j: usize) -> f64 {
+        self.values[i * self.n + j] as f64
+    }
+
+    /// Row `i`: `F_ij` for every `j`.
+    pub fn row(&self, i: usize) -> &[f32] {
+        &self.values[i * self.n..(i + 1) * self.n]
+    }
+}
+
+impl Transport for DenseFormFactors {
+    fn patch_count(&self) -> usize {
+        self.n
+    }
+
+    fn gather_row(&self, i: usize, radiosity: &[Rgb]) -> Rgb {
+        self.row(i).iter().zip(radiosity).map(|(&f, b)| *b * f as f64).sum()
+    }
+
+    fn for_each_in_column(&self, j: usize, visit: &mut dyn FnMut(usize, f64)) {
+        for i in 0..self.n {
+            let f = self.values[i * self.n + j];
+            if f != 0.0 {
+                visit(i, f as f64);
+            }
+        }
+    }
+}

@@ -1,0 +1,40 @@
+//! The radiosity solver of radcast: scene in, radiosity per patch out. No networking.
+//!
+//! The flow is [`scene`] (OBJ + MTL) -> [`mesh`] (patches) -> [`form_factors`] (with
+//! [`visibility`]) -> [`solve`]; [`pipeline`] runs it end to end with timings.
+
+pub mod form_factors;
+pub mod geometry;
+pub mod mesh;
+pub mod pipeline;
+pub mod scene;
+pub mod solve;
+pub mod visibility;
+
+pub use form_factors::{DenseFormFactors, FormFactorSettings, Transport};
+pub use mesh::{Mesh, Patch, PatchTarget};
+pub use pipeline::{SolveError, SolveReport, SolveRequest, Solved, solve_file, solve_scene};
+pub use scene::{Material, Rgb, Scene, SceneError};
+pub use solve::{Method, SolveOutcome, SolverSettings, System, solve};
+
+/// Where a long computation is, for progress displays.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Progress {
+    /// Form-factor rows done out of total (two passes over every row).
+    FormFactors {
+        /// Rows finished.
+        done: usize,
+        /// Rows in all.
+        total: usize,
+    },
+    /// A solver iteration finished with this relative residual.
+    Solve {
+        /// Iterations so far.
+        iteration: usize,
+        /// Relative residual (an estimate inside a GMRES cycle).
+        residual: f64,
+    },
+}
+
+/// A progress sink that ignores everything.
+pub fn no_progress(_: Progress) {}

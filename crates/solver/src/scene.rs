@@ -1,0 +1,307 @@
+//! Scenes: named objects made of planar faces, each with a diffuse reflectance and an emitted
+//! radiosity, loaded from Wavefront OBJ + MTL or built in code.
+
+use crate::geometry::Polygon;
+use glam::DVec3;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// A linear RGB triple: radiosity in W/m^2 per channel, or a unitless reflectance.
+pub type Rgb = DVec3;
+
+/// Why a scene could not be loaded. Every variant names the file and, where one exists, the line.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The OBJ or MTL file could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        /// The file that failed.
+        path: PathBuf,
+        /// The operating system's reason.
+        source: std::io::Error,
+    },
+    /// The OBJ parser rejected the file.
+    #[error("{path}: {reason}")]
+    Parse {
+        /// The OBJ file.
+        path: PathBuf,
+        /// The parser's reason.
+        reason: String,
+    },
+    /// A line of the OBJ file is wrong: a bad number, an index out of range, an unknown material.
+    #[error("{path}:{line}: {reason}")]
+    Line {
+        /// The OBJ file.
+        path: PathBuf,
+        /// One-based line number.
+        line: usize,
+        /// What is wrong on that line.
+        reason: String,
+    },
+    /// A material has a value outside its physical range.
+    #[error("{path}: material '{material}': {reason}")]
+    Material {
+        /// The file that defines the material.
+        path: PathBuf,
+        /// The material's name.
+        material: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// Faces were given without any `usemtl`.
+    #[error("{path}: object '{object}' has faces but no material (add `usemtl NAME`)")]
+    NoMaterial {
+        /// The OBJ file.
+        path: PathBuf,
+        /// The object's name.
+        object: String,
+    },
+    /// Nothing with a non-zero area is left to light.
+    #[error("{path}: the scene has no faces with non-zero area")]
+    Empty {
+        /// The OBJ file.
+        path: PathBuf,
+    },
+}
+
+/// One named object of the scene (an OBJ `o` or `g`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneObject {
+    /// The name from the file, unique within the scene.
+    pub name: String,
+}
+
+/// A planar face with its material.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Face {
+    /// The face's shape; light leaves and arrives on its front only.
+    pub polygon: Polygon,
+    /// Index into [`Scene::objects`].
+    pub object: u32,
+    /// Diffuse reflectance per channel, in [0, 1).
+    pub reflectance: Rgb,
+    /// Emitted radiosity per channel, W/m^2, finite and >= 0.
+    pub emission: Rgb,
+}
+
+/// A scene ready for meshing.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scene {
+    /// Named objects, in file order.
+    pub objects: Vec<SceneObject>,
+    /// All faces; quads stay quads when planar and convex, anything else becomes triangles.
+    pub faces: Vec<Face>,
+    /// Faces dropped because their area was zero (relative to the scene's size).
+    pub skipped_degenerate_faces: usize,
+}
+
+/// A material's physical values.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Material {
+    /// Diffuse reflectance (`Kd`).
+    pub reflectance: Rgb,
+    /// Emitted radiosity (`Ke`).
+    pub emission: Rgb,
+}
+
+impl Material {
+    /// Checks the physical ranges: reflectance in [0, 1) and emission finite and >= 0.
+    pub fn validate(&self) -> Result<(), String> {
+        let r = self.reflectance.to_array();
+        if !r.iter().all(|c| c.is_finite() && (0.0..1.0).contains(c)) {
+            return Err(format!("Kd {r:?} must have every channel in [0, 1)"));
+        }
+        let e = self.emission.to_array();
+        if !e.iter().all(|c| c.is_finite() && *c >= 0.0) {
+            return Err(format!("Ke {e:?} must have every channel finite and >= 0"));
+        }
+        Ok(())
+    }
+}
+
+impl Scene {
+    /// Appends an object and returns its index; faces are added with [`Scene::add_polygon`].
+    pub fn add_object(&mut self, name: impl Into<String>) -> u32 {
+        self.objects.push(SceneObject { name: name.into() });
+        (self.objects.len() - 1) as u32
+    }
+
+    /// Adds a polygon given by its corners (counter-clockwise seen from the front) to `object`.
+    /// Planar convex quads stay quads; other polygons are split into a triangle fan.
+    pub fn add_polygon(&mut self, object: u32, corners: &[DVec3], material: Material) {
+        let face = |polygon| Face { polygon, object, reflectance: material.reflectance, emission: material.emission };
+        if let [a, b, c, d] = *corners
+            && Polygon::is_planar_convex_quad(a, b, c, d)
+        {
+            self.faces.push(face(Polygon::quad(a, b, c, d)));
+            return;
+        }
+        for k in 1..corners.len().saturating_sub(1) {
+            self.faces.push(face(Polygon::triangle(corners[0], corners[k], corners[k + 1])));
+        }
+    }
+
+    /// Drops faces whose area is negligible against the scene's size, counting them.
+    pub fn drop_degenerate_faces(&mut self) {
+        let (lo, hi) = self.faces.iter().flat_map(|f| f.polygon.corners().to_vec()).fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), p| (lo.min(p), hi.max(p)),
+        );
+        let diagonal_sq = if self.faces.is_empty() { 0.0 } else { (hi - lo).length_squared() };
+        let before = self.faces.len();
+        // Area ratios down to 1e-12 of the scene are real geometry (issue: tiny next to huge).
+        self.faces.retain(|f| f.polygon.area() > 1e-14 * diagonal_sq);
+        self.skipped_degenerate_faces += before - self.faces.len();
+    }
+
+    /// Number of triangles the faces make (a quad counts two).
+    pub fn triangle_count(&self) -> usize {
+        self.faces.iter().map(|f| if f.polygon.is_quad() { 2 } else { 1 }).sum()
+    }
+
+    /// True when some face emits light.
+    pub fn has_emitter(&self) -> bool {
+        self.faces.iter().any(|f| f.emission.max_element() > 0.0)
+    }
+
+    /// Uniform scale of every coordinate, for tests of scale invariance.
+    pub fn scaled(&self, factor: f64) -> Scene {
+        let mut scaled = self.clone();
+        for face in &mut scaled.faces {
+            let c: Vec<DVec3> = face.polygon.corners().iter().map(|p| *p * factor).collect();
+            face.polygon = match *c.as_slice() {
+                [a, b, c] => Polygon::triangle(a, b, c),
+                [a, b, c, d] => Polygon::quad(a, b, c, d),
+                _ => unreachable!("polygons have three or four corners"),
+            };
+        }
+        scaled
+    }
+
+    /// Loads an OBJ file and the MTL libraries it names (relative to the OBJ's folder).
+    pub fn load_obj(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
+        let folder = path.parent().unwrap_or(Path::new("."));
+        let mtl_failure = std::cell::RefCell::new(None);
+        let options = tobj::LoadOptions { triangulate: false, single_index: true, ignore_lines: true, ignore_points: true, ..Default::default() };
+        let loaded = tobj::load_obj_buf(&mut text.as_bytes(), &options, |mtl| {
+            let mtl_path = folder.join(mtl);
+            let result = tobj::load_mtl(&mtl_path);
+            if result.is_err() {
+                *mtl_failure.borrow_mut() = Some(mtl_path);
+            }
+            result
+        });
+        // Check lines first: our messages name the line, tobj's do not.
+        let (models, materials) = match loaded {
+            Ok((models, materials)) => {
+                if let Some(mtl_path) = mtl_failure.take() {
+                    return Err(mtl_error(&mtl_path));
+                }
+                let materials = materials.map_err(|e| SceneError::Parse { path: path.into(), reason: e.to_string() })?;
+                lint_obj(path, &text, Some(&materials))?;
+                (models, materials)
+            }
+            Err(e) => {
+                lint_obj(path, &text, None)?;
+                return Err(SceneError::Parse { path: path.into(), reason: e.to_string() });
+            }
+        };
+        let mtl_path = first_mtllib(&text).map(|m| folder.join(m)).unwrap_or_else(|| path.into());
+        let checked: Vec<Material> = materials
+            .iter()
+            .map(|m| {
+                let rgb = |c: Option<[f32; 3]>| c.map(|c| Rgb::from(c.map(f64::from))).unwrap_or(Rgb::ZERO);
+                let material = Material { reflectance: rgb(m.diffuse), emission: rgb(m.emissive) };
+                material
+                    .validate()
+                    .map(|()| material)
+                    .map_err(|reason| SceneError::Material { path: mtl_path.clone(), material: m.name.clone(), reason })
+            })
+            .collect::<Result<_, _>>()?;
+
+        let mut scene = Scene::default();
+        let mut object_ids: HashMap<String, u32> = HashMap::new();
+        for model in &models {
+            let mesh = &model.mesh;
+            if mesh.indices.is_empty() {
+                continue;
+            }
+            let Some(material) = mesh.material_id.map(|id| checked[id]) else {
+                return Err(SceneError::NoMaterial { path: path.into(), object: model.name.clone() });
+            };
+            let object = *object_ids.entry(model.name.clone()).or_insert_with(|| scene.add_object(model.name.clone()));
+            let position = |i: u32| {
+                let p = &mesh.positions[3 * i as usize..3 * i as usize + 3];
+                DVec3::new(p[0].into(), p[1].into(), p[2].into())
+            };
+            let mut start = 0;
+            let arities = if mesh.face_arities.is_empty() { vec![3; mesh.indices.len() / 3] } else { mesh.face_arities.clone() };
+            for arity in arities {
+                let corners: Vec<DVec3> = mesh.indices[start..start + arity as usize].iter().map(|&i| position(i)).collect();
+                start += arity as usize;
+                scene.add_polygon(object, &corners, material);
+            }
+        }
+        scene.drop_degenerate_faces();
+        if scene.faces.is_empty() {
+            return Err(SceneError::Empty { path: path.into() });
+        }
+        Ok(scene)
+    }
+}
+
+fn mtl_error(mtl_path: &Path) -> SceneError {
+    match std::fs::metadata(mtl_path) {
+        Err(source) => SceneError::Io { path: mtl_path.into(), source },
+        Ok(_) => SceneError::Parse { path: mtl_path.into(), reason: "not a valid MTL file".into() },
+    }
+}
+
+fn first_mtllib(text: &str) -> Option<&str> {
+    text.lines().find_map(|l| l.trim().strip_prefix("mtllib ").map(str::trim))
+}
+
+/// Line-level checks that the OBJ parser does not report with a line number: non-finite
+/// coordinates, face indices out of range, and unknown materials (when the library loaded).
+fn lint_obj(path: &Path, text: &str, materials: Option<&[tobj::Material]>) -> Result<(), SceneError> {
+    let fail = |line: usize, reason: String| Err(SceneError::Line { path: path.into(), line: line + 1, reason });
+    let mut vertex_count: i64 = 0;
+    for (number, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => {
+                vertex_count += 1;
+                for word in words.take(3) {
+                    match word.parse::<f64>() {
+                        Ok(x) if x.is_finite() => {}
+                        _ => return fail(number, format!("vertex {vertex_count} has coordinate '{word}', which is not a finite number")),
+                    }
+                }
+            }
+            Some("f") => {
+                for word in words {
+                    let index_text = word.split('/').next().unwrap_or_default();
+                    let Ok(index) = index_text.parse::<i64>() else {
+                        return fail(number, format!("face vertex '{word}' is not an index"));
+                    };
+                    // OBJ indices are one-based; negative ones count back from the last vertex.
+                    let resolved = if index < 0 { vertex_count + 1 + index } else { index };
+                    if resolved < 1 || resolved > vertex_count {
+                        return fail(number, format!("face refers to vertex {index}, but only {vertex_count} vertices are defined before it"));
+                    }
+                }
+            }
+            Some("usemtl") => {
+                let name = line.trim_start().trim_start_matches("usemtl").trim();
+                if let Some(materials) = materials
+                    && !materials.iter().any(|m| m.name == name)
+                {
+                    return fail(number, format!("material '{name}' is not defined in any mtllib"));
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}

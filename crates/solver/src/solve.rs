@@ -1,0 +1,300 @@
+//! Linear solvers for the radiosity system `B = E + rho * (F B)` (per channel), all on any
+//! [`Transport`] and all stopping on the same residual, so their answers can be compared.
+//!
+//! The residual is `r = E + rho * F B - B`; a solve stops when the area-weighted relative norm
+//! `sqrt(sum_i A_i |r_i|^2) / sqrt(sum_i A_i |E_i|^2)` falls to the tolerance. Its error bound is
+//! `|B - B*| <= |r| / (1 - max rho)`, which is why bright scenes need a small tolerance.
+
+use crate::Progress;
+use crate::form_factors::Transport;
+use crate::scene::Rgb;
+use rayon::prelude::*;
+use std::fmt;
+use std::str::FromStr;
+
+/// The iterative method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Jacobi sweeps, the original prototype's method: error shrinks like `rho^k`.
+    Jacobi,
+    /// Gauss-Seidel sweeps with over-relaxation `omega` (SOR; `omega = 1` is plain Gauss-Seidel).
+    GaussSeidel,
+    /// Progressive refinement (Cohen et al. 1988): shoot the patch with the most unshot power.
+    Progressive,
+    /// Restarted GMRES (Saad, Schultz 1986): a Krylov method, fast for bright enclosures.
+    Gmres,
+}
+
+impl Method {
+    /// Every method, for sweeps and help texts.
+    pub const ALL: [Method; 4] = [Method::Jacobi, Method::GaussSeidel, Method::Progressive, Method::Gmres];
+
+    /// The name used on the command line and in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Jacobi => "jacobi",
+            Method::GaussSeidel => "gauss-seidel",
+            Method::Progressive => "progressive",
+            Method::Gmres => "gmres",
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Method::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
+            let names: Vec<_> = Method::ALL.iter().map(|m| m.name()).collect();
+            format!("unknown method '{s}' (expected one of: {})", names.join(", "))
+        })
+    }
+}
+
+/// When and how to stop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolverSettings {
+    /// The method.
+    pub method: Method,
+    /// Stop when the relative residual is at most this.
+    pub tolerance: f64,
+    /// Give up after this many iterations (sweeps, shots or matrix-vector products).
+    pub max_iterations: usize,
+    /// SOR relaxation factor for Gauss-Seidel, in (0, 2).
+    pub relaxation: f64,
+}
+
+impl Default for SolverSettings {
+    fn default() -> Self {
+        SolverSettings { method: Method::Gmres, tolerance: 1e-6, max_iterations: 100_000, relaxation: 1.0 }
+    }
+}
+
+/// The per-patch data of the system.
+#[derive(Clone, Copy, Debug)]
+pub struct System<'a> {
+    /// Diffuse reflectance per patch.
+    pub reflectance: &'a [Rgb],
+    /// Emitted radiosity per patch, W/m^2.
+    pub emission: &'a [Rgb],
+    /// Patch areas, the weights of the residual norm.
+    pub area: &'a [f64],
+}
+
+/// A solver's answer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SolveOutcome {
+    /// Radiosity per patch, W/m^2.
+    pub radiosity: Vec<Rgb>,
+    /// Iterations done: sweeps (Jacobi, Gauss-Seidel), shots (progressive) or matrix-vector
+    /// products (GMRES).
+    pub iterations: usize,
+    /// Final relative residual.
+    pub residual: f64,
+    /// Whether the residual reached the tolerance.
+    pub converged: bool,
+}
+
+impl System<'_> {
+    /// `r = E + rho * F B - B` into `r`.
+    fn residual_into(&self, transport: &dyn Transport, radiosity: &[Rgb], r: &mut [Rgb]) {
+        transport.gather(radiosity, r);
+        r.par_iter_mut().enumerate().for_each(|(i, r)| *r = self.emission[i] + self.reflectance[i] * *r - radiosity[i]);
+    }
+
+    /// `sqrt(sum_i A_i |v_i|^2)`.
+    fn weighted_norm(&self, v: &[Rgb]) -> f64 {
+        v.iter().zip(self.area).map(|(x, a)| a * x.length_squared()).sum::<f64>().sqrt()
+    }
+}
+
+/// Solves `system` on `transport` from `initial` (or zero), reporting each iteration.
+pub fn solve(
+    transport: &dyn Transport,
+    system: &System,
+    settings: &SolverSettings,
+    initial: Option<&[Rgb]>,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> SolveOutcome {
+    let n = transport.patch_count();
+    let mut radiosity = initial.map(<[Rgb]>::to_vec).unwrap_or_else(|| vec![Rgb::ZERO; n]);
+    let emission_norm = system.weighted_norm(system.emission);
+    if emission_norm == 0.0 {
+        // No light: the answer is exactly zero, not 0/0.
+        return SolveOutcome { radiosity: vec![Rgb::ZERO; n], iterations: 0, residual: 0.0, converged: true };
+    }
+    let mut run = Run { transport, system, settings, emission_norm, progress };
+    let (iterations, residual) = match settings.method {
+        Method::Jacobi => run.jacobi(&mut radiosity),
+        Method::GaussSeidel => run.gauss_seidel(&mut radiosity),
+        Method::Progressive => run.progressive(&mut radiosity),
+        Method::Gmres => run.gmres(&mut radiosity),
+    };
+    // The exact solution is a sum of non-negative terms; clamp round-off below zero.
+    radiosity.iter_mut().for_each(|b| *b = b.max(Rgb::ZERO));
+    SolveOutcome { radiosity, iterations, residual, converged: residual <= settings.tolerance }
+}
+
+struct Run<'a> {
+    transport: &'a dyn Transport,
+    system: &'a System<'a>,
+    settings: &'a SolverSettings,
+    emission_norm: f64,
+    progress: &'a (dyn Fn(Progress) + Sync),
+}
+
+impl Run<'_> {
+    /// Reports and says whether to stop.
+    fn done(&self, iteration: usize, residual: f64) -> bool {
+        (self.progress)(Progress::Solve { iteration, residual });
+        residual <= self.settings.tolerance || iteration >= self.settings.max_iterations || !residual.is_finite()
+    }
+
+    fn relative_residual(&self, radiosity: &[Rgb], r: &mut [Rgb]) -> f64 {
+        self.system.residual_into(self.transport, radiosity, r);
+        self.system.weighted_norm(r) / self.emission_norm
+    }
+
+    fn jacobi(&mut self, radiosity: &mut [Rgb]) -> (usize, f64) {
+        let mut r = vec![Rgb::ZERO; radiosity.len()];
+        let mut iteration = 0;
+        loop {
+            let residual = self.relative_residual(radiosity, &mut r);
+            if self.done(iteration, residual) {
+                return (iteration, residual);
+            }
+            // B + r = E + rho F B: one Jacobi sweep.
+            radiosity.iter_mut().zip(&r).for_each(|(b, r)| *b += *r);
+            iteration += 1;
+        }
+    }
+
+    fn gauss_seidel(&mut self, radiosity: &mut [Rgb]) -> (usize, f64) {
+        let (system, omega) = (self.system, self.settings.relaxation);
+        let mut r = vec![Rgb::ZERO; radiosity.len()];
+        let mut iteration = 0;
+        loop {
+            let residual = self.relative_residual(radiosity, &mut r);
+            if self.done(iteration, residual) {
+                return (iteration, residual);
+            }
+            for i in 0..radiosity.len() {
+                let updated = system.emission[i] + system.reflectance[i] * self.transport.gather_row(i, radiosity);
+                radiosity[i] += (updated - radiosity[i]) * omega;
+            }
+            iteration += 1;
+        }
+    }
+
+    fn progressive(&mut self, radiosity: &mut [Rgb]) -> (usize, f64) {
+        let system = self.system;
+        // Southwell iteration: r is kept equal to the true residual, so shooting patch j's
+        // unshot radiosity r_j adds rho_i F_ij r_j to every other residual.
+        let mut r = vec![Rgb::ZERO; radiosity.len()];
+        self.system.residual_into(self.transport, radiosity, &mut r);
+        let mut iteration = 0;
+        loop {
+            let (mut shooter, mut most_power, mut norm_sq) = (0, -1.0, 0.0);
+            for (j, (r, a)) in r.iter().zip(system.area).enumerate() {
+                norm_sq += a * r.length_squared();
+                let power = a * r.abs().element_sum();
+                if power > most_power {
+                    (shooter, most_power) = (j, power);
+                }
+            }
+            if self.done(iteration, norm_sq.sqrt() / self.emission_norm) {
+                return (iteration, norm_sq.sqrt() / self.emission_norm);
+            }
+            let unshot = std::mem::take(&mut r[shooter]);
+            radiosity[shooter] += unshot;
+            self.transport.for_each_in_column(shooter, &mut |i, f| r[i] += system.reflectance[i] * unshot * f);
+            iteration += 1;
+        }
+    }
+
+    /// Restarted GMRES on the area-scaled system `D M D^-1 (D B) = D E`, `D = diag(sqrt(A))`,
+    /// `M = I - rho F`, so that its minimised 2-norm is our weighted residual norm. The three
+    /// channels run as three Krylov processes sharing each matrix-vector product.
+    fn gmres(&mut self, radiosity: &mut [Rgb]) -> (usize, f64) {
+        const RESTART: usize = 30;
+        let system = self.system;
+        let n = radiosity.len();
+        let scale: Vec<f64> = system.area.iter().map(|a| a.sqrt()).collect();
+        let dot = |a: &[Rgb], b: &[Rgb]| a.iter().zip(b).map(|(x, y)| *x * *y).sum::<Rgb>();
+        let safe_div = |x: Rgb, y: Rgb| Rgb::select(y.cmpeq(Rgb::ZERO), Rgb::ZERO, x / y);
+        let norm = |a: &[Rgb]| dot(a, a).map(f64::sqrt);
+        let target = self.settings.tolerance * self.emission_norm;
+        let mut unscaled = vec![Rgb::ZERO; n];
+        let mut product = vec![Rgb::ZERO; n];
+        let mut iteration = 0;
+        loop {
+            // Scaled residual of the current iterate.
+            let mut r = vec![Rgb::ZERO; n];
+            self.system.residual_into(self.transport, radiosity, &mut r);
+            r.iter_mut().zip(&scale).for_each(|(r, s)| *r *= *s);
+            let beta = norm(&r);
+            if self.done(iteration, beta.length() / self.emission_norm) {
+                return (iteration, beta.length() / self.emission_norm);
+            }
+            let mut basis: Vec<Vec<Rgb>> = vec![r.iter().map(|x| safe_div(*x, beta)).collect()];
+            let mut hessenberg: Vec<Vec<Rgb>> = Vec::new();
+            let (mut cosines, mut sines): (Vec<Rgb>, Vec<Rgb>) = (Vec::new(), Vec::new());
+            let mut g = vec![beta];
+            for k in 0..RESTART {
+                // w = D M D^-1 v_k
+                unscaled.iter_mut().zip(&basis[k]).zip(&scale).for_each(|((u, v), s)| *u = *v / *s);
+                self.transport.gather(&unscaled, &mut product);
+                let mut w: Vec<Rgb> = (0..n).map(|i| (unscaled[i] - system.reflectance[i] * product[i]) * scale[i]).collect();
+                iteration += 1;
+                // Modified Gram-Schmidt.
+                let mut column = Vec::with_capacity(k + 2);
+                for v in &basis {
+                    let h = dot(&w, v);
+                    w.iter_mut().zip(v).for_each(|(w, v)| *w -= h * *v);
+                    column.push(h);
+                }
+                let next_norm = norm(&w);
+                column.push(next_norm);
+                basis.push(w.iter().map(|x| safe_div(*x, next_norm)).collect());
+                // Earlier Givens rotations, then a new one to zero the subdiagonal.
+                for i in 0..k {
+                    let (a, b) = (column[i], column[i + 1]);
+                    column[i] = cosines[i] * a + sines[i] * b;
+                    column[i + 1] = -sines[i] * a + cosines[i] * b;
+                }
+                let radius = (column[k] * column[k] + column[k + 1] * column[k + 1]).map(f64::sqrt);
+                let cosine = Rgb::select(radius.cmpeq(Rgb::ZERO), Rgb::ONE, safe_div(column[k], radius));
+                let sine = safe_div(column[k + 1], radius);
+                column[k] = cosine * column[k] + sine * column[k + 1];
+                column[k + 1] = Rgb::ZERO;
+                g.push(-sine * g[k]);
+                g[k] *= cosine;
+                cosines.push(cosine);
+                sines.push(sine);
+                hessenberg.push(column);
+                let estimate = g[k + 1].length();
+                (self.progress)(Progress::Solve { iteration, residual: estimate / self.emission_norm });
+                if estimate <= target || iteration >= self.settings.max_iterations {
+                    break;
+                }
+            }
+            // Back-substitute H y = g and update the iterate.
+            let m = hessenberg.len();
+            let mut y = vec![Rgb::ZERO; m];
+            for i in (0..m).rev() {
+                let tail = (i + 1..m).map(|j| hessenberg[j][i] * y[j]).sum::<Rgb>();
+                y[i] = safe_div(g[i] - tail, hessenberg[i][i]);
+            }
+            for (i, b) in radiosity.iter_mut().enumerate() {
+                let step: Rgb = (0..m).map(|k| y[k] * basis[k][i]).sum();
+                *b += step / scale[i];
+            }
+        }
+    }
+}

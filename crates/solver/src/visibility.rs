@@ -1,0 +1,152 @@
+//! Shadow rays: is the segment between two surface points blocked by any other face?
+//!
+//! The occluders are the scene's input faces (not the patches), in obvhs's compressed wide BVH,
+//! chosen by measurement (docs/BENCHMARKS.md). Coordinates are re-centred on the scene before
+//! the conversion to f32, so a scene far from the origin keeps its precision.
+
+use crate::scene::Scene;
+use glam::{DVec3, Vec3A};
+use obvhs::bvh2::{Bvh2, builder::build_bvh2};
+use obvhs::{Boundable, BvhBuildParams, aabb::Aabb, cwbvh::CwBvh, cwbvh::builder::build_cwbvh, ray::Ray};
+use std::time::Duration;
+
+/// One input face as an occluder, in f32 relative to the scene centre.
+struct OccluderFace {
+    corners: [Vec3A; 4],
+    arity: usize,
+    normal: Vec3A,
+}
+
+impl Boundable for OccluderFace {
+    fn aabb(&self) -> Aabb {
+        Aabb::from_points(&self.corners[..self.arity])
+    }
+}
+
+impl OccluderFace {
+    /// Ray parameter of the hit, or infinity. Edges are inclusive with a relative margin, so
+    /// a ray through the seam of two faces that share an edge hits one of them: no cracks.
+    fn intersect(&self, ray: &Ray) -> f32 {
+        const EDGE_MARGIN: f32 = 1e-6;
+        let denominator = self.normal.dot(ray.direction);
+        if denominator == 0.0 {
+            return f32::INFINITY;
+        }
+        let t = self.normal.dot(self.corners[0] - ray.origin) / denominator;
+        if !(t >= ray.tmin && t <= ray.tmax) {
+            return f32::INFINITY;
+        }
+        let hit = ray.origin + ray.direction * t;
+        let c = &self.corners[..self.arity];
+        let inside = (0..self.arity).all(|k| {
+            let edge = c[(k + 1) % self.arity] - c[k];
+            edge.cross(hit - c[k]).dot(self.normal) >= -EDGE_MARGIN * edge.length_squared()
+        });
+        if inside { t } else { f32::INFINITY }
+    }
+}
+
+/// How segments find the faces they cross. Kept selectable so `examples/ray_backends.rs` can
+/// measure them against each other on the same intersection code (docs/BENCHMARKS.md).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RayBackend {
+    /// obvhs's compressed 8-wide BVH (the default: fastest measured).
+    CwBvh,
+    /// obvhs's binary BVH.
+    Bvh2,
+    /// Every face tested against every segment.
+    Linear,
+}
+
+enum Index {
+    CwBvh(CwBvh),
+    Bvh2(Bvh2),
+    Linear,
+}
+
+/// The scene's faces, ready for segment queries.
+pub struct Occluders {
+    index: Index,
+    faces: Vec<OccluderFace>,
+    centre: DVec3,
+}
+
+/// Segments are shortened by this fraction of their length at each end, so that a point on a
+/// surface never shadows itself; relative, so scale does not matter.
+const SEGMENT_END_MARGIN: f32 = 1e-5;
+
+impl Occluders {
+    /// Builds the default index over every face of `scene`.
+    pub fn new(scene: &Scene) -> Self {
+        Self::with_backend(scene, RayBackend::CwBvh)
+    }
+
+    /// Builds the given kind of index over every face of `scene`.
+    pub fn with_backend(scene: &Scene, backend: RayBackend) -> Self {
+        let (lo, hi) = scene.faces.iter().flat_map(|f| f.polygon.corners().to_vec()).fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), p| (lo.min(p), hi.max(p)),
+        );
+        let centre = if scene.faces.is_empty() { DVec3::ZERO } else { (lo + hi) * 0.5 };
+        let faces: Vec<OccluderFace> = scene
+            .faces
+            .iter()
+            .map(|face| {
+                let c = face.polygon.corners();
+                let mut corners = [Vec3A::ZERO; 4];
+                for (slot, p) in corners.iter_mut().zip(c) {
+                    *slot = Vec3A::from((*p - centre).as_vec3());
+                }
+                OccluderFace { corners, arity: c.len(), normal: Vec3A::from(face.polygon.normal().as_vec3()) }
+            })
+            .collect();
+        let params = BvhBuildParams::medium_build();
+        let index = match backend {
+            _ if faces.is_empty() => Index::Linear,
+            RayBackend::CwBvh => Index::CwBvh(build_cwbvh(&faces, params, &mut Duration::default())),
+            RayBackend::Bvh2 => Index::Bvh2(build_bvh2(&faces, params, &mut Duration::default())),
+            RayBackend::Linear => Index::Linear,
+        };
+        Occluders { index, faces, centre }
+    }
+
+    /// True when nothing but faces `ignore[0]` and `ignore[1]` (the endpoints' own faces, which a
+    /// segment between two of their points cannot cross) lies between `from` and `to`.
+    pub fn segment_is_clear(&self, from: DVec3, to: DVec3, ignore: [u32; 2]) -> bool {
+        let origin = Vec3A::from((from - self.centre).as_vec3());
+        let direction = Vec3A::from((to - from).as_vec3());
+        let ray = Ray::new(origin, direction, SEGMENT_END_MARGIN, 1.0 - SEGMENT_END_MARGIN);
+        let hit = |ray: &Ray, face: u32| {
+            if face == ignore[0] || face == ignore[1] { f32::INFINITY } else { self.faces[face as usize].intersect(ray) }
+        };
+        match &self.index {
+            Index::CwBvh(bvh) => bvh.ray_traverse_miss(ray, |ray, id| hit(ray, bvh.primitive_indices[id])),
+            Index::Bvh2(bvh) => bvh.ray_traverse_miss(ray, |ray, id| hit(ray, bvh.primitive_indices[id])),
+            Index::Linear => (0..self.faces.len() as u32).all(|face| hit(&ray, face) == f32::INFINITY),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Material, Rgb};
+    use glam::dvec3;
+
+    #[test]
+    fn a_wall_between_two_points_blocks_and_its_own_faces_do_not() {
+        let mut scene = Scene::default();
+        let wall = scene.add_object("wall");
+        let material = Material { reflectance: Rgb::splat(0.5), emission: Rgb::ZERO };
+        scene.add_polygon(wall, &[dvec3(-1.0, -1.0, 0.0), dvec3(1.0, -1.0, 0.0), dvec3(1.0, 1.0, 0.0), dvec3(-1.0, 1.0, 0.0)], material);
+        for backend in [RayBackend::CwBvh, RayBackend::Bvh2, RayBackend::Linear] {
+        let occluders = Occluders::with_backend(&scene, backend);
+        let (a, b) = (dvec3(0.0, 0.0, -1.0), dvec3(0.0, 0.0, 1.0));
+        assert!(!occluders.segment_is_clear(a, b, [u32::MAX, u32::MAX]));
+        assert!(occluders.segment_is_clear(a, b, [0, u32::MAX]));
+        assert!(occluders.segment_is_clear(dvec3(2.0, 0.0, -1.0), dvec3(2.0, 0.0, 1.0), [u32::MAX, u32::MAX]));
+        // A segment that stops short of the wall is clear.
+        assert!(occluders.segment_is_clear(a, dvec3(0.0, 0.0, -0.1), [u32::MAX, u32::MAX]));
+        }
+    }
+}
