@@ -1,0 +1,91 @@
+//! Scenes with known answers, built in code, and the closed forms they are checked against.
+#![allow(dead_code)] // each test binary uses its own subset
+
+use glam::{DVec3, dvec3};
+use solver::visibility::Occluders;
+use solver::{DenseFormFactors, FormFactorSettings, Material, Mesh, PatchTarget, Rgb, Scene};
+use std::f64::consts::PI;
+
+/// A grey material.
+pub fn grey(reflectance: f64, emission: f64) -> Material {
+    Material { reflectance: Rgb::splat(reflectance), emission: Rgb::splat(emission) }
+}
+
+/// Adds the parallelogram `origin, origin + u, origin + u + v, origin + v`; its front is `u x v`.
+pub fn add_rect(scene: &mut Scene, name: &str, origin: DVec3, u: DVec3, v: DVec3, material: Material) -> u32 {
+    let object = scene.add_object(name);
+    scene.add_polygon(object, &[origin, origin + u, origin + u + v, origin + v], material);
+    object
+}
+
+/// The closed cube [0, size]^3 with every face turned inwards, all of one material.
+pub fn closed_cube(size: f64, material: Material) -> Scene {
+    let mut scene = Scene::default();
+    let (x, y, z) = (DVec3::X * size, DVec3::Y * size, DVec3::Z * size);
+    add_rect(&mut scene, "floor", DVec3::ZERO, z, x, material);
+    add_rect(&mut scene, "ceiling", y, x, z, material);
+    add_rect(&mut scene, "wall_x0", DVec3::ZERO, y, z, material);
+    add_rect(&mut scene, "wall_x1", x, z, y, material);
+    add_rect(&mut scene, "wall_z0", DVec3::ZERO, x, y, material);
+    add_rect(&mut scene, "wall_z1", z, y, x, material);
+    scene
+}
+
+/// Two directly opposed `a x b` rectangles a distance `c` apart: "receiver" at z = 0 facing +z,
+/// "emitter" at z = c facing -z.
+pub fn parallel_plates(a: f64, b: f64, c: f64, receiver: Material, emitter: Material) -> Scene {
+    let mut scene = Scene::default();
+    add_rect(&mut scene, "receiver", DVec3::ZERO, DVec3::X * a, DVec3::Y * b, receiver);
+    add_rect(&mut scene, "emitter", dvec3(0.0, 0.0, c), DVec3::Y * b, DVec3::X * a, emitter);
+    scene
+}
+
+/// Two rectangles at 90 degrees sharing an edge of length `l`: "floor" (width `w`, on y = 0)
+/// and "wall" (height `h`, on x = 0).
+pub fn hinge(w: f64, h: f64, l: f64, floor: Material, wall: Material) -> Scene {
+    let mut scene = Scene::default();
+    add_rect(&mut scene, "floor", DVec3::ZERO, DVec3::Z * l, DVec3::X * w, floor);
+    add_rect(&mut scene, "wall", DVec3::ZERO, DVec3::Y * h, DVec3::Z * l, wall);
+    scene
+}
+
+/// Howell's catalog C-11: directly opposed parallel `a x b` rectangles at distance `c`.
+pub fn howell_parallel(a: f64, b: f64, c: f64) -> f64 {
+    let (x, y) = (a / c, b / c);
+    let (x2, y2) = (x * x, y * y);
+    2.0 / (PI * x * y)
+        * ((((1.0 + x2) * (1.0 + y2)) / (1.0 + x2 + y2)).sqrt().ln() + x * (1.0 + y2).sqrt() * (x / (1.0 + y2).sqrt()).atan()
+            + y * (1.0 + x2).sqrt() * (y / (1.0 + x2).sqrt()).atan()
+            - x * x.atan()
+            - y * y.atan())
+}
+
+/// Howell's catalog C-14: from the rectangle of width `w` to the one of height `h`, at 90
+/// degrees and sharing an edge of length `l`.
+pub fn howell_perpendicular(w: f64, h: f64, l: f64) -> f64 {
+    let (w, h) = (w / l, h / l);
+    let (w2, h2) = (w * w, h * h);
+    let root = (h2 + w2).sqrt();
+    let log_term = ((1.0 + w2) * (1.0 + h2) / (1.0 + w2 + h2)).ln()
+        + w2 * (w2 * (1.0 + w2 + h2) / ((1.0 + w2) * (w2 + h2))).ln()
+        + h2 * (h2 * (1.0 + w2 + h2) / ((1.0 + h2) * (h2 + w2))).ln();
+    1.0 / (PI * w) * (w * (1.0 / w).atan() + h * (1.0 / h).atan() - root * (1.0 / root).atan() + 0.25 * log_term)
+}
+
+/// Meshes `scene` and computes its dense form factors.
+pub fn form_factors(scene: &Scene, target: PatchTarget) -> (Mesh, DenseFormFactors) {
+    let mesh = Mesh::build(scene, target);
+    let occluders = Occluders::new(scene);
+    let factors = DenseFormFactors::compute(&mesh, &occluders, &FormFactorSettings::default(), &solver::no_progress);
+    (mesh, factors)
+}
+
+/// Area-weighted form factor from object `from` to object `to`: sum_i A_i sum_j F_ij / A_from.
+pub fn object_form_factor(mesh: &Mesh, factors: &DenseFormFactors, from: u32, to: u32) -> f64 {
+    let (mut weighted, mut area) = (0.0, 0.0);
+    for (i, p) in mesh.patches.iter().enumerate().filter(|(_, p)| p.object == from) {
+        area += p.area;
+        weighted += p.area * mesh.patches.iter().enumerate().filter(|(_, q)| q.object == to).map(|(j, _)| factors.get(i, j)).sum::<f64>();
+    }
+    weighted / area
+}

@@ -1,0 +1,101 @@
+//! Bad scene files give errors that name the file, the line and what is wrong.
+
+use solver::{Scene, SceneError};
+use std::path::{Path, PathBuf};
+
+const MTL: &str = "newmtl white\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n";
+const SQUARE: &str = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n";
+
+/// Writes `scene.obj` (and `scene.mtl` when given) into a fresh folder and loads it.
+fn load(obj: &str, mtl: Option<&str>) -> (Result<Scene, SceneError>, PathBuf, tempfile::TempDir) {
+    let folder = tempfile::tempdir().expect("temp dir");
+    if let Some(mtl) = mtl {
+        std::fs::write(folder.path().join("scene.mtl"), mtl).expect("write mtl");
+    }
+    let path = folder.path().join("scene.obj");
+    std::fs::write(&path, obj).expect("write obj");
+    (Scene::load_obj(&path), path, folder)
+}
+
+fn error_of(obj: &str, mtl: Option<&str>) -> (String, PathBuf) {
+    let (result, path, _folder) = load(obj, mtl);
+    (result.expect_err("the scene is bad").to_string(), path)
+}
+
+#[test]
+fn a_good_scene_loads_with_names_and_materials() {
+    let obj = format!("mtllib scene.mtl\no plate\nusemtl white\n{SQUARE}f 1 2 3 4\no lamp\nusemtl lamp\n{SQUARE}f -1 -2 -3\n");
+    let (scene, _, _folder) = load(&obj, Some(MTL));
+    let scene = scene.expect("loads");
+    let names: Vec<_> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+    assert_eq!(names, ["plate", "lamp"]);
+    assert_eq!(scene.faces.len(), 2);
+    assert!(scene.faces[0].polygon.is_quad() && !scene.faces[1].polygon.is_quad());
+    assert_eq!(scene.faces[1].emission.to_array(), [5.0; 3]);
+}
+
+#[test]
+fn a_missing_file_is_named() {
+    let error = Scene::load_obj(Path::new("no/such/scene.obj")).expect_err("missing").to_string();
+    assert!(error.starts_with("no/such/scene.obj: cannot read"), "{error}");
+}
+
+#[test]
+fn a_missing_material_library_is_named() {
+    let (error, path) = error_of(&format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 3\n"), None);
+    let mtl = path.with_extension("mtl");
+    assert!(error.starts_with(&format!("{}: cannot read", mtl.display())), "{error}");
+}
+
+#[test]
+fn an_unknown_material_names_its_line() {
+    let (error, path) = error_of(&format!("mtllib scene.mtl\no a\nusemtl marble\n{SQUARE}f 1 2 3\n"), Some(MTL));
+    assert_eq!(error, format!("{}:3: material 'marble' is not defined in any mtllib", path.display()));
+}
+
+#[test]
+fn faces_without_a_material_are_refused() {
+    let (error, path) = error_of(&format!("o bare\n{SQUARE}f 1 2 3\n"), None);
+    assert_eq!(error, format!("{}: object 'bare' has faces but no material (add `usemtl NAME`)", path.display()));
+}
+
+#[test]
+fn an_index_out_of_range_names_its_line() {
+    let (error, path) = error_of(&format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 9\n"), Some(MTL));
+    assert_eq!(error, format!("{}:8: face refers to vertex 9, but only 4 vertices are defined before it", path.display()));
+}
+
+#[test]
+fn non_finite_coordinates_name_their_line() {
+    for bad in ["nan", "inf", "-inf", "1e999", "abc"] {
+        let (error, path) = error_of(&format!("mtllib scene.mtl\no a\nusemtl white\nv 0 0 0\nv 1 {bad} 0\nv 0 1 0\nf 1 2 3\n"), Some(MTL));
+        assert_eq!(error, format!("{}:5: vertex 2 has coordinate '{bad}', which is not a finite number", path.display()));
+    }
+}
+
+#[test]
+fn reflectance_outside_zero_to_one_and_negative_emission_are_refused() {
+    for (material, reason) in [
+        ("Kd 1 0.5 0.5", "Kd [1.0, 0.5, 0.5] must have every channel in [0, 1)"),
+        ("Kd -0.1 0.5 0.5", "Kd [-0.10000000149011612, 0.5, 0.5] must have every channel in [0, 1)"),
+        ("Kd 0.5 0.5 0.5\nKe 1 -2 1", "Ke [1.0, -2.0, 1.0] must have every channel finite and >= 0"),
+    ] {
+        let (error, path) = error_of(&format!("mtllib scene.mtl\no a\nusemtl m\n{SQUARE}f 1 2 3\n"), Some(&format!("newmtl m\n{material}\n")));
+        assert_eq!(error, format!("{}: material 'm': {reason}", path.with_extension("mtl").display()));
+    }
+}
+
+#[test]
+fn zero_area_faces_are_skipped_and_counted() {
+    let obj = format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 3 4\nf 1 2 1\nv 2 0 0\nf 1 2 5\n");
+    let (scene, _, _folder) = load(&obj, Some(MTL));
+    let scene = scene.expect("loads");
+    assert_eq!(scene.faces.len(), 1);
+    assert_eq!(scene.skipped_degenerate_faces, 2);
+}
+
+#[test]
+fn a_scene_of_only_degenerate_faces_is_empty() {
+    let (error, path) = error_of("mtllib scene.mtl\no a\nusemtl white\nv 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", Some(MTL));
+    assert_eq!(error, format!("{}: the scene has no faces with non-zero area", path.display()));
+}
