@@ -1,0 +1,56 @@
+//! The `radcast` command as a user runs it.
+
+use std::process::Command;
+
+fn radcast(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_radcast"))
+        .args(args)
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+        .output()
+        .expect("radcast runs")
+}
+
+#[test]
+fn solve_json_reports_every_promised_field() {
+    let output = radcast(&["solve", "scenes/cornell-box.obj", "--patches", "200", "--method", "gauss-seidel", "--json"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).expect("one JSON object on stdout");
+    assert_eq!(report["method"], "gauss-seidel");
+    assert!(report["patches"].as_u64().unwrap().abs_diff(200) <= 20, "{}", report["patches"]);
+    assert_eq!(report["triangles"], 38);
+    assert!(report["iterations"].as_u64().unwrap() > 0);
+    assert!(report["residual"].as_f64().unwrap() <= 1e-6);
+    for stage in ["load", "mesh", "form_factors", "solve", "total"] {
+        assert!(report["seconds"][stage].as_f64().unwrap() >= 0.0, "{stage}");
+    }
+    let objects = report["objects"].as_array().unwrap();
+    let names: Vec<_> = objects.iter().map(|o| o["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["floor", "ceiling", "light", "back_wall", "right_wall", "left_wall", "short_block", "tall_block"]);
+    // The red wall is red and the green wall green: colour bleeding from the published materials.
+    let rgb = |name: &str| -> Vec<f64> {
+        let o = objects.iter().find(|o| o["name"] == name).unwrap();
+        o["radiosity"].as_array().unwrap().iter().map(|c| c.as_f64().unwrap()).collect()
+    };
+    assert!(rgb("left_wall")[0] > 5.0 * rgb("left_wall")[1]);
+    assert!(rgb("right_wall")[1] > 2.0 * rgb("right_wall")[0]);
+    // The floor gets light, the emitter keeps at least its emission.
+    assert!(rgb("floor").iter().all(|c| *c > 0.0));
+    assert!(rgb("light")[0] >= 17.0);
+}
+
+#[test]
+fn bad_input_exits_non_zero_with_the_reason() {
+    let output = radcast(&["solve", "scenes/does-not-exist.obj"]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("scenes/does-not-exist.obj: cannot read"), "{stderr}");
+
+    let output = radcast(&["solve", "scenes/cornell-box.obj", "--method", "magic"]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("unknown method 'magic' (expected one of: jacobi, gauss-seidel, progressive, gmres)"), "{stderr}");
+
+    let output = radcast(&["solve", "scenes/cornell-box.obj", "--tolerance", "NaN"]);
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("--tolerance must be in (0, 1), got NaN"));
+}
