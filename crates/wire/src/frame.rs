@@ -1,0 +1,346 @@
+//! Messages on the WebSocket, as binary frames. The byte layouts are in docs/PROTOCOL.md.
+//!
+//! Every message starts with a kind byte and a flags byte; fixed-size headers follow as
+//! little-endian fields (bincode 2 with fixed-width integers), then the payload.
+
+use crate::DecodeError;
+use bincode::{Decode, Encode};
+
+/// The protocol version this crate speaks; a [`Hello`] with another one is refused.
+pub const PROTOCOL_VERSION: u16 = 1;
+
+/// The most patches a frame may claim: bounds what a decoder allocates for hostile input.
+pub const MAX_PATCHES: u32 = 1 << 26;
+
+/// Flag: the payload is LZ4-compressed (a u32 uncompressed size, then an LZ4 block).
+pub const FLAG_COMPRESSED: u8 = 1;
+/// Flag: this frame holds the converged solution for its version.
+pub const FLAG_FINAL: u8 = 2;
+
+const KIND_HELLO: u8 = 1;
+const KIND_FULL: u8 = 2;
+const KIND_DELTA: u8 = 3;
+const KIND_REQUEST_FULL: u8 = 16;
+
+/// Fixed-width little-endian integers: every header has one fixed layout (docs/PROTOCOL.md).
+pub(crate) fn config() -> bincode::config::Configuration<bincode::config::LittleEndian, bincode::config::Fixint> {
+    bincode::config::standard().with_fixed_int_encoding().with_little_endian()
+}
+
+/// The first message on every connection.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Encode, Decode)]
+pub struct Hello {
+    /// [`PROTOCOL_VERSION`] of the server.
+    pub protocol_version: u16,
+    /// Identifies the scene file and solve settings (a hash); stable across restarts.
+    pub scene_id: u64,
+    /// Bumped whenever the geometry changes: refetch `/api/scene` when it differs.
+    pub geometry_version: u64,
+    /// Patches in every frame.
+    pub patch_count: u32,
+}
+
+/// What every frame says about the solution it carries.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameInfo {
+    /// Increases with every published state (progressive steps and re-solves alike).
+    pub solution_version: u64,
+    /// Server clock when the frame was encoded, microseconds since the Unix epoch.
+    pub sent_at_unix_micros: u64,
+    /// Decoded RGB9E5 values are multiplied by this (a power of two) to give W/m^2.
+    pub scale: f32,
+    /// Patches in the buffer.
+    pub patch_count: u32,
+    /// The solver converged for this version.
+    pub is_final: bool,
+}
+
+/// The whole patch buffer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FullFrame {
+    /// Version, time, scale, size.
+    pub info: FrameInfo,
+    /// One RGB9E5 code per patch, in patch order.
+    pub colours: Vec<u32>,
+}
+
+/// Only the patches whose code changed since `base_version`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DeltaFrame {
+    /// The version a receiver must hold to apply this.
+    pub base_version: u64,
+    /// Version, time, scale, size after applying.
+    pub info: FrameInfo,
+    /// Changed patch indices, strictly increasing.
+    pub indices: Vec<u32>,
+    /// New codes, one per index.
+    pub colours: Vec<u32>,
+}
+
+/// A message from the server.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ServerMessage {
+    /// Sent once, first.
+    Hello(Hello),
+    /// A whole buffer.
+    Full(FullFrame),
+    /// Changes against an earlier version.
+    Delta(DeltaFrame),
+}
+
+/// A message from a viewer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ClientMessage {
+    /// "Send me a full frame": after a delta whose base the viewer does not hold.
+    RequestFull,
+}
+
+#[derive(Encode, Decode)]
+struct FullHeader {
+    solution_version: u64,
+    sent_at_unix_micros: u64,
+    scale: f32,
+    patch_count: u32,
+}
+
+#[derive(Encode, Decode)]
+struct DeltaHeader {
+    base_version: u64,
+    solution_version: u64,
+    sent_at_unix_micros: u64,
+    scale: f32,
+    patch_count: u32,
+    change_count: u32,
+}
+
+fn flags_for(info: &FrameInfo) -> u8 {
+    if info.is_final { FLAG_FINAL } else { 0 }
+}
+
+/// Appends `payload` raw, or LZ4-compressed when that is smaller, and returns the flag to set.
+fn push_payload(out: &mut Vec<u8>, payload: &[u8]) -> u8 {
+    let compressed = lz4_flex::block::compress(payload);
+    if compressed.len() + 4 < payload.len() {
+        out.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+        out.extend_from_slice(&compressed);
+        FLAG_COMPRESSED
+    } else {
+        out.extend_from_slice(payload);
+        0
+    }
+}
+
+fn encode_header(kind: u8, flags: u8, header: impl Encode) -> Vec<u8> {
+    let mut out = vec![kind, flags];
+    bincode::encode_into_std_write(header, &mut out, config()).expect("writing to a Vec cannot fail");
+    out
+}
+
+impl ServerMessage {
+    /// The message's bytes, ready to send as one binary WebSocket message.
+    pub fn encode(&self) -> Vec<u8> {
+        match self {
+            ServerMessage::Hello(hello) => encode_header(KIND_HELLO, 0, hello),
+            ServerMessage::Full(frame) => {
+                let info = &frame.info;
+                let header = FullHeader {
+                    solution_version: info.solution_version,
+                    sent_at_unix_micros: info.sent_at_unix_micros,
+                    scale: info.scale,
+                    patch_count: frame.colours.len() as u32,
+                };
+                let mut out = encode_header(KIND_FULL, flags_for(info), header);
+                let payload: Vec<u8> = frame.colours.iter().flat_map(|c| c.to_le_bytes()).collect();
+                out[1] |= push_payload(&mut out, &payload);
+                out
+            }
+            ServerMessage::Delta(frame) => {
+                let info = &frame.info;
+                let header = DeltaHeader {
+                    base_version: frame.base_version,
+                    solution_version: info.solution_version,
+                    sent_at_unix_micros: info.sent_at_unix_micros,
+                    scale: info.scale,
+                    patch_count: info.patch_count,
+                    change_count: frame.indices.len() as u32,
+                };
+                let mut out = encode_header(KIND_DELTA, flags_for(info), header);
+                let mut payload = Vec::with_capacity(frame.indices.len() * 6);
+                let mut next = 0u32;
+                for &index in &frame.indices {
+                    // Gaps between strictly increasing indices, as LEB128 varints.
+                    write_varint(&mut payload, index - next);
+                    next = index + 1;
+                }
+                payload.extend(frame.colours.iter().flat_map(|c| c.to_le_bytes()));
+                out[1] |= push_payload(&mut out, &payload);
+                out
+            }
+        }
+    }
+
+    /// Parses one message; never panics, whatever the bytes.
+    pub fn decode(bytes: &[u8]) -> Result<ServerMessage, DecodeError> {
+        let (kind, flags, rest) = split_kind(bytes)?;
+        match kind {
+            KIND_HELLO => {
+                check_flags(flags, 0)?;
+                let (hello, used): (Hello, usize) = decode_header(rest)?;
+                expect_end(&rest[used..])?;
+                if hello.protocol_version != PROTOCOL_VERSION {
+                    return Err(DecodeError::UnsupportedVersion { got: hello.protocol_version, supported: PROTOCOL_VERSION });
+                }
+                Ok(ServerMessage::Hello(hello))
+            }
+            KIND_FULL => {
+                check_flags(flags, FLAG_COMPRESSED | FLAG_FINAL)?;
+                let (header, used): (FullHeader, usize) = decode_header(rest)?;
+                check_patch_count(header.patch_count)?;
+                let expected = header.patch_count as usize * 4;
+                let payload = take_payload(&rest[used..], flags, expected)?;
+                if payload.len() != expected {
+                    return Err(DecodeError::Length { what: "full frame colours", expected, got: payload.len() });
+                }
+                let colours = payload.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+                let info = FrameInfo {
+                    solution_version: header.solution_version,
+                    sent_at_unix_micros: header.sent_at_unix_micros,
+                    scale: check_scale(header.scale)?,
+                    patch_count: header.patch_count,
+                    is_final: flags & FLAG_FINAL != 0,
+                };
+                Ok(ServerMessage::Full(FullFrame { info, colours }))
+            }
+            KIND_DELTA => {
+                check_flags(flags, FLAG_COMPRESSED | FLAG_FINAL)?;
+                let (header, used): (DeltaHeader, usize) = decode_header(rest)?;
+                check_patch_count(header.patch_count)?;
+                if header.change_count > header.patch_count {
+                    return Err(DecodeError::TooLarge { what: "delta change count", size: header.change_count as u64, limit: header.patch_count as u64 });
+                }
+                // Each change takes at most 5 varint bytes and 4 colour bytes.
+                let payload = take_payload(&rest[used..], flags, header.change_count as usize * 9)?;
+                let (indices, colour_bytes) = read_indices(&payload, header.change_count, header.patch_count)?;
+                let expected = header.change_count as usize * 4;
+                if colour_bytes.len() != expected {
+                    return Err(DecodeError::Length { what: "delta colours", expected, got: colour_bytes.len() });
+                }
+                let colours = colour_bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+                let info = FrameInfo {
+                    solution_version: header.solution_version,
+                    sent_at_unix_micros: header.sent_at_unix_micros,
+                    scale: check_scale(header.scale)?,
+                    patch_count: header.patch_count,
+                    is_final: flags & FLAG_FINAL != 0,
+                };
+                Ok(ServerMessage::Delta(DeltaFrame { base_version: header.base_version, info, indices, colours }))
+            }
+            other => Err(DecodeError::UnknownKind(other)),
+        }
+    }
+}
+
+impl ClientMessage {
+    /// The message's bytes.
+    pub fn encode(&self) -> Vec<u8> {
+        match self {
+            ClientMessage::RequestFull => vec![KIND_REQUEST_FULL, 0],
+        }
+    }
+
+    /// Parses one message; never panics, whatever the bytes.
+    pub fn decode(bytes: &[u8]) -> Result<ClientMessage, DecodeError> {
+        let (kind, flags, rest) = split_kind(bytes)?;
+        match kind {
+            KIND_REQUEST_FULL => {
+                check_flags(flags, 0)?;
+                expect_end(rest)?;
+                Ok(ClientMessage::RequestFull)
+            }
+            other => Err(DecodeError::UnknownKind(other)),
+        }
+    }
+}
+
+fn split_kind(bytes: &[u8]) -> Result<(u8, u8, &[u8]), DecodeError> {
+    match bytes {
+        [kind, flags, rest @ ..] => Ok((*kind, *flags, rest)),
+        _ => Err(DecodeError::Truncated { what: "message kind and flags", needed: 2, got: bytes.len() }),
+    }
+}
+
+fn check_flags(flags: u8, allowed: u8) -> Result<(), DecodeError> {
+    if flags & !allowed != 0 { Err(DecodeError::UnknownFlags(flags)) } else { Ok(()) }
+}
+
+fn check_patch_count(count: u32) -> Result<(), DecodeError> {
+    if count > MAX_PATCHES { Err(DecodeError::TooLarge { what: "patch count", size: count as u64, limit: MAX_PATCHES as u64 }) } else { Ok(()) }
+}
+
+fn check_scale(scale: f32) -> Result<f32, DecodeError> {
+    if scale.is_finite() && scale > 0.0 { Ok(scale) } else { Err(DecodeError::Invalid(format!("scale {scale} must be finite and positive"))) }
+}
+
+fn expect_end(rest: &[u8]) -> Result<(), DecodeError> {
+    if rest.is_empty() { Ok(()) } else { Err(DecodeError::TrailingBytes(rest.len())) }
+}
+
+fn decode_header<T: Decode<()>>(bytes: &[u8]) -> Result<(T, usize), DecodeError> {
+    bincode::decode_from_slice(bytes, config()).map_err(|e| DecodeError::Header(e.to_string()))
+}
+
+/// The payload, decompressed if flagged; refuses to inflate beyond `limit` bytes.
+fn take_payload(bytes: &[u8], flags: u8, limit: usize) -> Result<Vec<u8>, DecodeError> {
+    if flags & FLAG_COMPRESSED == 0 {
+        return Ok(bytes.to_vec());
+    }
+    let [a, b, c, d, block @ ..] = bytes else {
+        return Err(DecodeError::Truncated { what: "compressed payload size", needed: 4, got: bytes.len() });
+    };
+    let size = u32::from_le_bytes([*a, *b, *c, *d]) as usize;
+    if size > limit {
+        return Err(DecodeError::TooLarge { what: "uncompressed payload", size: size as u64, limit: limit as u64 });
+    }
+    let mut out = vec![0; size];
+    let written = lz4_flex::block::decompress_into(block, &mut out).map_err(|e| DecodeError::Invalid(format!("LZ4 payload: {e}")))?;
+    if written != size {
+        return Err(DecodeError::Length { what: "decompressed payload", expected: size, got: written });
+    }
+    Ok(out)
+}
+
+fn write_varint(out: &mut Vec<u8>, mut value: u32) {
+    while value >= 0x80 {
+        out.push((value as u8) | 0x80);
+        value >>= 7;
+    }
+    out.push(value as u8);
+}
+
+/// Reads `count` gap-encoded indices; returns them and the bytes after them.
+fn read_indices(bytes: &[u8], count: u32, patch_count: u32) -> Result<(Vec<u32>, &[u8]), DecodeError> {
+    let mut indices = Vec::with_capacity(count as usize);
+    let (mut position, mut next) = (0usize, 0u64);
+    for _ in 0..count {
+        let (mut gap, mut shift) = (0u64, 0);
+        loop {
+            let &byte = bytes.get(position).ok_or(DecodeError::Truncated { what: "delta indices", needed: position + 1, got: bytes.len() })?;
+            position += 1;
+            gap |= ((byte & 0x7F) as u64) << shift;
+            if byte & 0x80 == 0 {
+                break;
+            }
+            shift += 7;
+            if shift > 28 {
+                return Err(DecodeError::Invalid("delta index varint longer than 5 bytes".into()));
+            }
+        }
+        let index = next + gap;
+        if index >= patch_count as u64 {
+            return Err(DecodeError::IndexOutOfRange { index, patch_count });
+        }
+        indices.push(index as u32);
+        next = index + 1;
+    }
+    Ok((indices, &bytes[position..]))
+}

@@ -1,0 +1,167 @@
+//! The radcast wire protocol: what the server sends and viewers receive. No async runtime.
+//!
+//! - [`rgb9e5`]: each patch's colour in 4 bytes (shared-exponent HDR).
+//! - [`frame`]: hello, full and delta frames, and the viewer's requests.
+//! - [`geometry`]: the scene as a viewer fetches it once.
+//! - [`PatchBuffer`]: a viewer's copy of the colours, kept current by applying frames.
+
+pub mod frame;
+pub mod geometry;
+pub mod rgb9e5;
+
+pub use frame::{ClientMessage, DeltaFrame, FrameInfo, FullFrame, Hello, PROTOCOL_VERSION, ServerMessage};
+pub use geometry::{Camera, Geometry};
+
+/// Why bytes could not be decoded. Decoders return these; they never panic.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DecodeError {
+    /// The message ends early.
+    #[error("truncated {what}: need {needed} bytes, have {got}")]
+    Truncated {
+        /// The part being read.
+        what: &'static str,
+        /// Bytes needed.
+        needed: usize,
+        /// Bytes there.
+        got: usize,
+    },
+    /// The kind byte names no message.
+    #[error("unknown message kind {0}")]
+    UnknownKind(u8),
+    /// Flag bits this version does not define.
+    #[error("unknown flags {0:#04x}")]
+    UnknownFlags(u8),
+    /// The peer speaks another protocol version.
+    #[error("protocol version {got} is not supported (this side speaks {supported})")]
+    UnsupportedVersion {
+        /// The peer's version.
+        got: u16,
+        /// Ours.
+        supported: u16,
+    },
+    /// A count or size exceeds what is allowed.
+    #[error("{what} {size} exceeds the limit {limit}")]
+    TooLarge {
+        /// The field.
+        what: &'static str,
+        /// Its value.
+        size: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// A section has the wrong length.
+    #[error("{what}: expected {expected} bytes, got {got}")]
+    Length {
+        /// The section.
+        what: &'static str,
+        /// Bytes expected.
+        expected: usize,
+        /// Bytes found.
+        got: usize,
+    },
+    /// A delta names a patch that does not exist.
+    #[error("patch index {index} out of range (patch count {patch_count})")]
+    IndexOutOfRange {
+        /// The index.
+        index: u64,
+        /// Patches in the frame.
+        patch_count: u32,
+    },
+    /// Bytes after the end of a complete message.
+    #[error("{0} trailing bytes after the message")]
+    TrailingBytes(usize),
+    /// Geometry bytes do not start with [`geometry::MAGIC`].
+    #[error("not radcast geometry (bad magic)")]
+    BadMagic,
+    /// A fixed header could not be read.
+    #[error("bad header: {0}")]
+    Header(String),
+    /// A value is out of its domain.
+    #[error("invalid: {0}")]
+    Invalid(String),
+}
+
+/// CRC-32 (IEEE, as zlib's `crc32`) of the codes as little-endian bytes: the checksum
+/// `/api/solution` reports, so any viewer can check its buffer.
+pub fn checksum(colours: &[u32]) -> u32 {
+    let mut hasher = crc32fast::Hasher::new();
+    for c in colours {
+        hasher.update(&c.to_le_bytes());
+    }
+    hasher.finalize()
+}
+
+/// The power-of-two scale that fits `max_value` (W/m^2) under [`rgb9e5::MAX_VALUE`] while using
+/// the top of the exponent range, so dim and bright scenes keep the same relative precision.
+pub fn scale_for(max_value: f32) -> f32 {
+    if !(max_value.is_finite() && max_value > 0.0) {
+        return 1.0;
+    }
+    2f32.powi((max_value / rgb9e5::MAX_VALUE).log2().ceil().clamp(-100.0, 100.0) as i32)
+}
+
+/// Encodes one radiosity (W/m^2) with a frame's scale.
+pub fn encode_colour(rgb: [f32; 3], scale: f32) -> u32 {
+    rgb9e5::encode(rgb.map(|c| c / scale))
+}
+
+/// Decodes one code with a frame's scale, to W/m^2.
+pub fn decode_colour(code: u32, scale: f32) -> [f32; 3] {
+    rgb9e5::decode(code).map(|c| c * scale)
+}
+
+/// Why a frame could not be applied to a buffer.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ApplyError {
+    /// A delta against a version this buffer does not hold: ask for a full frame.
+    #[error("delta from version {base} but the buffer holds {held:?}")]
+    BaseMismatch {
+        /// The delta's base.
+        base: u64,
+        /// What the buffer holds.
+        held: Option<u64>,
+    },
+}
+
+/// A viewer's copy of the patch colours.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PatchBuffer {
+    /// The frame info of the state held, none before the first full frame.
+    pub info: Option<FrameInfo>,
+    /// One code per patch.
+    pub colours: Vec<u32>,
+}
+
+impl PatchBuffer {
+    /// Applies a frame; a hello changes nothing.
+    pub fn apply(&mut self, message: &ServerMessage) -> Result<(), ApplyError> {
+        match message {
+            ServerMessage::Hello(_) => {}
+            ServerMessage::Full(frame) => {
+                self.colours.clone_from(&frame.colours);
+                self.info = Some(frame.info);
+            }
+            ServerMessage::Delta(delta) => {
+                let held = self.info.map(|i| i.solution_version);
+                if held != Some(delta.base_version) || self.colours.len() != delta.info.patch_count as usize {
+                    return Err(ApplyError::BaseMismatch { base: delta.base_version, held });
+                }
+                for (&index, &colour) in delta.indices.iter().zip(&delta.colours) {
+                    self.colours[index as usize] = colour;
+                }
+                self.info = Some(delta.info);
+            }
+        }
+        Ok(())
+    }
+
+    /// Radiosity of patch `i`, W/m^2.
+    pub fn radiosity(&self, i: usize) -> [f32; 3] {
+        decode_colour(self.colours[i], self.info.map_or(1.0, |info| info.scale))
+    }
+}
+
+/// The delta from `old` to `new` (same length): the indices whose code changed.
+pub fn changes(old: &[u32], new: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    old.iter().zip(new).enumerate().filter(|(_, (a, b))| a != b).map(|(i, (_, b))| (i as u32, *b)).unzip()
+}
