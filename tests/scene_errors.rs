@@ -99,3 +99,13 @@ fn a_scene_of_only_degenerate_faces_is_empty() {
     let (error, path) = error_of("mtllib scene.mtl\no a\nusemtl white\nv 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", Some(MTL));
     assert_eq!(error, format!("{}: the scene has no faces with non-zero area", path.display()));
 }
+
+#[test]
+fn a_view_line_is_parsed_and_a_bad_one_names_its_line() {
+    let obj = format!("#@view eye 0 1 -5 target 0 1 0 up 0 1 0 fov 40\nmtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 3\n");
+    let (scene, _, _folder) = load(&obj, Some(MTL));
+    let view = scene.expect("loads").view.expect("has a view");
+    assert_eq!((view.eye.z, view.vertical_fov_degrees), (-5.0, 40.0));
+    let (error, path) = error_of(&format!("mtllib scene.mtl\n#@view eye 0 1 -5 target 0 1 0 up 0 1 0 fov 400\no a\nusemtl white\n{SQUARE}f 1 2 3\n"), Some(MTL));
+    assert_eq!(error, format!("{}:2: the view needs eye != target, a non-zero up and a fov in (0, 180)", path.display()));
+}

@@ -13,13 +13,13 @@ pub mod visibility;
 
 pub use form_factors::{DenseFormFactors, FormFactorSettings, Transport};
 pub use mesh::{Mesh, Patch, PatchTarget};
-pub use pipeline::{SolveError, SolveReport, SolveRequest, Solved, solve_file, solve_scene};
-pub use scene::{Material, Rgb, Scene, SceneError};
+pub use pipeline::{SolveError, SolveReport, SolveRequest, Solved, solve_file, solve_mesh, solve_scene};
+pub use scene::{Material, Rgb, Scene, SceneError, View};
 pub use solve::{Method, SolveOutcome, SolverSettings, System, solve};
 
-/// Where a long computation is, for progress displays.
+/// Where a long computation is, for progress displays and progressive streaming.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Progress {
+pub enum Progress<'a> {
     /// Form-factor rows done out of total (two passes over every row).
     FormFactors {
         /// Rows finished.
@@ -33,6 +33,11 @@ pub enum Progress {
         iteration: usize,
         /// Relative residual (an estimate inside a GMRES cycle).
         residual: f64,
+    },
+    /// The solver's current estimate, between iterations (at GMRES restarts).
+    Estimate {
+        /// Radiosity per patch, W/m^2; not yet converged.
+        radiosity: &'a [Rgb],
     },
 }
 

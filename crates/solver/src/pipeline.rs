@@ -131,23 +131,34 @@ pub fn solve_file(path: &Path, request: &SolveRequest, progress: &(dyn Fn(Progre
 
 /// Meshes, computes form factors and solves an already loaded scene.
 pub fn solve_scene(scene: Scene, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<Solved, SolveError> {
+    let start = Instant::now();
+    let mesh = Mesh::build(&scene, request.patches);
+    let mesh_seconds = start.elapsed().as_secs_f64();
+    let (radiosity, mut report) = solve_mesh(&scene, &mesh, request, progress)?;
+    report.seconds.mesh += mesh_seconds;
+    report.seconds.total += mesh_seconds;
+    Ok(Solved { scene, mesh, radiosity, report })
+}
+
+/// Form factors and solve for a mesh already built from `scene` (the server meshes first so
+/// that viewers get the geometry while it solves). `seconds.mesh` holds the BVH build only.
+pub fn solve_mesh(scene: &Scene, mesh: &Mesh, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<(Vec<Rgb>, SolveReport), SolveError> {
     let mut seconds = StageSeconds::default();
     let mut clock = Instant::now();
     let mut lap = |slot: &mut f64| {
         *slot = clock.elapsed().as_secs_f64();
         clock = Instant::now();
     };
-    let mesh = Mesh::build(&scene, request.patches);
     let n = mesh.patches.len();
     let bytes = DenseFormFactors::memory_bytes(n);
     if bytes > request.max_matrix_bytes {
         let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
         return Err(SolveError::TooLarge { patches: n, gib: gib(bytes), limit_gib: gib(request.max_matrix_bytes) });
     }
-    let occluders = Occluders::new(&scene);
+    let occluders = Occluders::new(scene);
     lap(&mut seconds.mesh);
 
-    let form_factors = DenseFormFactors::compute(&mesh, &occluders, &request.form_factors, progress);
+    let form_factors = DenseFormFactors::compute(mesh, &occluders, &request.form_factors, progress);
     lap(&mut seconds.form_factors);
 
     let column = |f: fn(&crate::mesh::Patch) -> Rgb| mesh.patches.iter().map(f).collect::<Vec<_>>();
@@ -169,9 +180,9 @@ pub fn solve_scene(scene: Scene, request: &SolveRequest, progress: &(dyn Fn(Prog
         tolerance: request.solver.tolerance,
         rays: form_factors.rays_cast,
         seconds,
-        objects: object_means(&scene, &mesh, &radiosity),
+        objects: object_means(scene, mesh, &radiosity),
     };
-    Ok(Solved { scene, mesh, radiosity, report })
+    Ok((radiosity, report))
 }
 
 /// Area-weighted mean radiosity of every object.

@@ -84,9 +84,49 @@ pub struct Face {
     pub emission: Rgb,
 }
 
+/// A suggested viewpoint, from a `#@view eye X Y Z target X Y Z up X Y Z fov DEGREES` line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    /// Eye position.
+    pub eye: DVec3,
+    /// Point looked at.
+    pub target: DVec3,
+    /// Up direction.
+    pub up: DVec3,
+    /// Vertical field of view, degrees.
+    pub vertical_fov_degrees: f64,
+}
+
+impl View {
+    /// Parses the words after `#@view`.
+    fn parse(words: &str) -> Result<View, String> {
+        let w: Vec<&str> = words.split_whitespace().collect();
+        let number = |i: usize| -> Result<f64, String> {
+            w.get(i).and_then(|s| s.parse::<f64>().ok()).filter(|x| x.is_finite()).ok_or_else(|| format!("expected a finite number at word {}", i + 1))
+        };
+        let vector = |label: &str, at: usize| -> Result<DVec3, String> {
+            if w.get(at) != Some(&label) {
+                return Err(format!("expected '{label}' at word {}", at + 1));
+            }
+            Ok(DVec3::new(number(at + 1)?, number(at + 2)?, number(at + 3)?))
+        };
+        let (eye, target, up) = (vector("eye", 0)?, vector("target", 4)?, vector("up", 8)?);
+        if w.get(12) != Some(&"fov") || w.len() != 14 {
+            return Err("expected `#@view eye X Y Z target X Y Z up X Y Z fov DEGREES`".into());
+        }
+        let vertical_fov_degrees = number(13)?;
+        if !(vertical_fov_degrees > 0.0 && vertical_fov_degrees < 180.0) || eye == target || up == DVec3::ZERO {
+            return Err("the view needs eye != target, a non-zero up and a fov in (0, 180)".into());
+        }
+        Ok(View { eye, target, up, vertical_fov_degrees })
+    }
+}
+
 /// A scene ready for meshing.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Scene {
+    /// The scene file's suggested viewpoint, if it has a `#@view` line.
+    pub view: Option<View>,
     /// Named objects, in file order.
     pub objects: Vec<SceneObject>,
     /// All faces; quads stay quads when planar and convex, anything else becomes triangles.
@@ -220,7 +260,7 @@ impl Scene {
             })
             .collect::<Result<_, _>>()?;
 
-        let mut scene = Scene::default();
+        let mut scene = Scene { view: find_view(path, &text)?, ..Scene::default() };
         let mut object_ids: HashMap<String, u32> = HashMap::new();
         for model in &models {
             let mesh = &model.mesh;
@@ -256,6 +296,15 @@ fn mtl_error(mtl_path: &Path) -> SceneError {
         Err(source) => SceneError::Io { path: mtl_path.into(), source },
         Ok(_) => SceneError::Parse { path: mtl_path.into(), reason: "not a valid MTL file".into() },
     }
+}
+
+fn find_view(path: &Path, text: &str) -> Result<Option<View>, SceneError> {
+    for (number, line) in text.lines().enumerate() {
+        if let Some(words) = line.trim().strip_prefix("#@view") {
+            return View::parse(words).map(Some).map_err(|reason| SceneError::Line { path: path.into(), line: number + 1, reason });
+        }
+    }
+    Ok(None)
 }
 
 fn first_mtllib(text: &str) -> Option<&str> {

@@ -151,8 +151,9 @@ struct Run<'a> {
 
 impl Run<'_> {
     /// Reports and says whether to stop.
-    fn done(&self, iteration: usize, residual: f64) -> bool {
+    fn done(&self, iteration: usize, residual: f64, radiosity: &[Rgb]) -> bool {
         (self.progress)(Progress::Solve { iteration, residual });
+        (self.progress)(Progress::Estimate { radiosity });
         residual <= self.settings.tolerance || iteration >= self.settings.max_iterations || !residual.is_finite()
     }
 
@@ -166,7 +167,7 @@ impl Run<'_> {
         let mut iteration = 0;
         loop {
             let residual = self.relative_residual(radiosity, &mut r);
-            if self.done(iteration, residual) {
+            if self.done(iteration, residual, radiosity) {
                 return (iteration, residual);
             }
             // B + r = E + rho F B: one Jacobi sweep.
@@ -181,7 +182,7 @@ impl Run<'_> {
         let mut iteration = 0;
         loop {
             let residual = self.relative_residual(radiosity, &mut r);
-            if self.done(iteration, residual) {
+            if self.done(iteration, residual, radiosity) {
                 return (iteration, residual);
             }
             for i in 0..radiosity.len() {
@@ -208,7 +209,7 @@ impl Run<'_> {
                     (shooter, most_power) = (j, power);
                 }
             }
-            if self.done(iteration, norm_sq.sqrt() / self.emission_norm) {
+            if self.done(iteration, norm_sq.sqrt() / self.emission_norm, radiosity) {
                 return (iteration, norm_sq.sqrt() / self.emission_norm);
             }
             let unshot = std::mem::take(&mut r[shooter]);
@@ -239,7 +240,7 @@ impl Run<'_> {
             self.system.residual_into(self.transport, radiosity, &mut r);
             r.iter_mut().zip(&scale).for_each(|(r, s)| *r *= *s);
             let beta = norm(&r);
-            if self.done(iteration, beta.length() / self.emission_norm) {
+            if self.done(iteration, beta.length() / self.emission_norm, radiosity) {
                 return (iteration, beta.length() / self.emission_norm);
             }
             let mut basis: Vec<Vec<Rgb>> = vec![r.iter().map(|x| safe_div(*x, beta)).collect()];

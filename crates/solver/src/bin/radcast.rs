@@ -112,6 +112,9 @@ impl ProgressPrinter {
     }
 
     fn report(&self, progress: Progress) {
+        if let Progress::Estimate { .. } = progress {
+            return;
+        }
         let Ok(mut last) = self.last.try_lock() else { return };
         if last.elapsed() < Duration::from_secs(1) {
             return;
@@ -121,6 +124,7 @@ impl ProgressPrinter {
         match progress {
             Progress::FormFactors { done, total } => eprintln!("[{t:6.1}s] form factors {:5.1}%", 100.0 * done as f64 / total as f64),
             Progress::Solve { iteration, residual } => eprintln!("[{t:6.1}s] solve: iteration {iteration}, residual {residual:.3e}"),
+            Progress::Estimate { .. } => {}
         }
     }
 }

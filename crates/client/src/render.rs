@@ -1,0 +1,243 @@
+//! A small software rasterizer: z-buffered triangles, radiosity interpolated smoothly from
+//! patches to their corners, and a documented tone map to 8-bit sRGB.
+//!
+//! Tone map: exposure `k = 0.18 / Lavg`, where `Lavg` is the area-weighted geometric mean of the
+//! patches' Rec. 709 luminance (Reinhard et al. 2002, "Photographic Tone Reproduction", eq. 1-2);
+//! each channel becomes `x / (1 + x)` with `x = k * radiosity`, then the sRGB transfer function
+//! (IEC 61966-2-1).
+
+use anyhow::{Context, bail};
+use glam::Vec3;
+use std::path::Path;
+use wire::geometry::NO_CORNER;
+use wire::{Geometry, PatchBuffer};
+
+/// A pinhole camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    /// Eye position, scene units.
+    pub eye: Vec3,
+    /// Point looked at.
+    pub target: Vec3,
+    /// Up direction.
+    pub up: Vec3,
+    /// Vertical field of view, degrees.
+    pub vertical_fov_degrees: f32,
+}
+
+impl View {
+    /// Parses `ex,ey,ez,tx,ty,tz,ux,uy,uz,fov` (eye, target, up, vertical fov in degrees).
+    pub fn parse(text: &str) -> anyhow::Result<View> {
+        let numbers: Vec<f32> = text
+            .split(',')
+            .map(|s| s.trim().parse::<f32>().ok().filter(|x| x.is_finite()).with_context(|| format!("camera '{text}': '{s}' is not a finite number")))
+            .collect::<Result<_, _>>()?;
+        let [ex, ey, ez, tx, ty, tz, ux, uy, uz, fov] = numbers[..] else {
+            bail!("camera '{text}' needs 10 numbers: eye x,y,z, target x,y,z, up x,y,z, fov degrees");
+        };
+        let view = View { eye: Vec3::new(ex, ey, ez), target: Vec3::new(tx, ty, tz), up: Vec3::new(ux, uy, uz), vertical_fov_degrees: fov };
+        if view.eye == view.target || view.up.cross(view.target - view.eye) == Vec3::ZERO || !(fov > 0.0 && fov < 180.0) {
+            bail!("camera '{text}': eye must differ from target, up must not be parallel to the view, fov must be in (0, 180)");
+        }
+        Ok(view)
+    }
+
+    /// The scene's own suggested view, or one that frames its bounding box from -z.
+    pub fn for_scene(geometry: &Geometry) -> View {
+        if let Some(c) = geometry.camera {
+            return View { eye: c.eye.into(), target: c.target.into(), up: c.up.into(), vertical_fov_degrees: c.vertical_fov_degrees };
+        }
+        let (lo, hi) = geometry.positions.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), p| {
+            (lo.min(Vec3::from(*p)), hi.max(Vec3::from(*p)))
+        });
+        let (centre, radius) = ((lo + hi) * 0.5, ((hi - lo).length() * 0.5).max(f32::MIN_POSITIVE));
+        let fov: f32 = 45.0;
+        let distance = 1.1 * radius / (fov.to_radians() * 0.5).sin();
+        View { eye: centre - Vec3::Z * distance, target: centre, up: Vec3::Y, vertical_fov_degrees: fov }
+    }
+}
+
+/// An 8-bit sRGB image.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Row-major RGB bytes.
+    pub rgb: Vec<u8>,
+}
+
+impl Image {
+    /// The pixel at column `x`, row `y` (row 0 at the top).
+    pub fn pixel(&self, x: u32, y: u32) -> [u8; 3] {
+        let i = 3 * (y * self.width + x) as usize;
+        [self.rgb[i], self.rgb[i + 1], self.rgb[i + 2]]
+    }
+
+    /// Writes a PNG.
+    pub fn write_png(&self, path: &Path) -> anyhow::Result<()> {
+        let file = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
+        let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), self.width, self.height);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.write_header()?.write_image_data(&self.rgb).with_context(|| format!("{}: writing PNG", path.display()))
+    }
+}
+
+fn corners(patch: &[u32; 4]) -> &[u32] {
+    if patch[3] == NO_CORNER { &patch[..3] } else { &patch[..] }
+}
+
+fn patch_area(geometry: &Geometry, patch: &[u32; 4]) -> f32 {
+    let p = |i: usize| Vec3::from(geometry.positions[patch[i] as usize]);
+    if patch[3] == NO_CORNER { 0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length() } else { 0.5 * (p(2) - p(0)).cross(p(3) - p(1)).length() }
+}
+
+/// Radiosity at every corner: the area-weighted mean of the patches around it. Corners are
+/// shared within a face only, so colours never blend across a crease between materials.
+pub fn corner_radiosity(geometry: &Geometry, buffer: &PatchBuffer) -> Vec<Vec3> {
+    let mut sums = vec![(Vec3::ZERO, 0.0f32); geometry.positions.len()];
+    for (i, patch) in geometry.patches.iter().enumerate() {
+        let (area, radiosity) = (patch_area(geometry, patch), Vec3::from(buffer.radiosity(i)));
+        for &c in corners(patch) {
+            sums[c as usize].0 += radiosity * area;
+            sums[c as usize].1 += area;
+        }
+    }
+    sums.into_iter().map(|(sum, area)| if area > 0.0 { sum / area } else { Vec3::ZERO }).collect()
+}
+
+/// The exposure `0.18 / Lavg` of the module docs.
+pub fn exposure(geometry: &Geometry, buffer: &PatchBuffer) -> f32 {
+    let luminance = |i: usize| Vec3::from(buffer.radiosity(i)).dot(Vec3::new(0.2126, 0.7152, 0.0722));
+    let brightest = (0..geometry.patches.len()).map(luminance).fold(0.0, f32::max);
+    if brightest <= 0.0 {
+        return 1.0;
+    }
+    let floor = 1e-4 * brightest;
+    let (mut log_sum, mut area_sum) = (0.0f64, 0.0f64);
+    for (i, patch) in geometry.patches.iter().enumerate() {
+        let area = patch_area(geometry, patch) as f64;
+        log_sum += area * (luminance(i).max(floor) as f64).ln();
+        area_sum += area;
+    }
+    (0.18 / (log_sum / area_sum.max(f64::MIN_POSITIVE)).exp()) as f32
+}
+
+fn srgb_byte(linear: f32) -> u8 {
+    let c = linear.clamp(0.0, 1.0);
+    let encoded = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+    (encoded * 255.0 + 0.5) as u8
+}
+
+/// Renders the patches from `view`; both sides of every face are drawn.
+pub fn render(geometry: &Geometry, buffer: &PatchBuffer, view: &View, width: u32, height: u32) -> Image {
+    let colours = corner_radiosity(geometry, buffer);
+    let k = exposure(geometry, buffer);
+    let camera = Camera::new(view, geometry, width, height);
+    let mut inverse_depth = vec![0.0f32; (width * height) as usize];
+    let mut linear = vec![Vec3::ZERO; (width * height) as usize];
+    for patch in &geometry.patches {
+        let c = corners(patch);
+        for k in 1..c.len() - 1 {
+            let triangle = [c[0], c[k], c[k + 1]].map(|i| (camera.to_camera(Vec3::from(geometry.positions[i as usize])), colours[i as usize]));
+            let polygon = clip_near(&triangle, camera.near);
+            for j in 1..polygon.len().saturating_sub(1) {
+                camera.raster(&[polygon[0], polygon[j], polygon[j + 1]], &mut inverse_depth, &mut linear);
+            }
+        }
+    }
+    let rgb = linear.iter().flat_map(|c| (*c * k).to_array().map(|x| srgb_byte(x / (1.0 + x)))).collect();
+    Image { width, height, rgb }
+}
+
+/// A pinhole camera's orthonormal basis and image plane.
+struct Camera {
+    eye: Vec3,
+    right: Vec3,
+    up: Vec3,
+    forward: Vec3,
+    /// Pixels per unit of `x / depth` at the image plane.
+    focal_pixels: f32,
+    near: f32,
+    width: u32,
+    height: u32,
+}
+
+impl Camera {
+    fn new(view: &View, geometry: &Geometry, width: u32, height: u32) -> Camera {
+        let forward = (view.target - view.eye).normalize();
+        let right = forward.cross(view.up).normalize();
+        let up = right.cross(forward);
+        let extent = geometry.positions.iter().map(|p| (Vec3::from(*p) - view.eye).length()).fold(0.0, f32::max);
+        Camera {
+            eye: view.eye,
+            right,
+            up,
+            forward,
+            focal_pixels: 0.5 * height as f32 / (0.5 * view.vertical_fov_degrees.to_radians()).tan(),
+            near: (extent * 1e-4).max(f32::MIN_POSITIVE),
+            width,
+            height,
+        }
+    }
+
+    /// (right, up, depth) coordinates.
+    fn to_camera(&self, p: Vec3) -> Vec3 {
+        let d = p - self.eye;
+        Vec3::new(d.dot(self.right), d.dot(self.up), d.dot(self.forward))
+    }
+
+    /// Fills one camera-space triangle (depth >= near) with perspective-correct colours,
+    /// keeping the nearest surface per pixel.
+    fn raster(&self, triangle: &[(Vec3, Vec3); 3], inverse_depth: &mut [f32], linear: &mut [Vec3]) {
+        let (w, h) = (self.width as f32, self.height as f32);
+        let screen = triangle.map(|(p, _)| Vec3::new(0.5 * w + self.focal_pixels * p.x / p.z, 0.5 * h - self.focal_pixels * p.y / p.z, 1.0 / p.z));
+        let edge = |a: Vec3, b: Vec3, x: f32, y: f32| (b.x - a.x) * (y - a.y) - (b.y - a.y) * (x - a.x);
+        let area = edge(screen[0], screen[1], screen[2].x, screen[2].y);
+        if area == 0.0 || !area.is_finite() {
+            return;
+        }
+        let bound = |f: fn(f32, f32) -> f32, start: f32, axis: fn(&Vec3) -> f32| screen.iter().map(axis).fold(start, f);
+        let min_x = bound(f32::min, f32::INFINITY, |p| p.x).floor().max(0.0) as u32;
+        let max_x = bound(f32::max, f32::NEG_INFINITY, |p| p.x).ceil().clamp(0.0, w) as u32;
+        let min_y = bound(f32::min, f32::INFINITY, |p| p.y).floor().max(0.0) as u32;
+        let max_y = bound(f32::max, f32::NEG_INFINITY, |p| p.y).ceil().clamp(0.0, h) as u32;
+        for y in min_y..max_y {
+            for x in min_x..max_x {
+                let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+                let b = [edge(screen[1], screen[2], px, py) / area, edge(screen[2], screen[0], px, py) / area, edge(screen[0], screen[1], px, py) / area];
+                if b.iter().any(|&v| v < 0.0) {
+                    continue;
+                }
+                // 1/depth is linear in screen space; larger is nearer.
+                let weights = [b[0] * screen[0].z, b[1] * screen[1].z, b[2] * screen[2].z];
+                let inverse = weights[0] + weights[1] + weights[2];
+                let index = (y * self.width + x) as usize;
+                if inverse <= inverse_depth[index] {
+                    continue;
+                }
+                inverse_depth[index] = inverse;
+                linear[index] = (triangle[0].1 * weights[0] + triangle[1].1 * weights[1] + triangle[2].1 * weights[2]) / inverse;
+            }
+        }
+    }
+}
+
+/// Clips a camera-space triangle to `depth >= near`; returns up to four corners.
+fn clip_near(triangle: &[(Vec3, Vec3); 3], near: f32) -> Vec<(Vec3, Vec3)> {
+    let mut out = Vec::with_capacity(4);
+    for k in 0..3 {
+        let (a, b) = (triangle[k], triangle[(k + 1) % 3]);
+        let (da, db) = (a.0.z - near, b.0.z - near);
+        if da >= 0.0 {
+            out.push(a);
+        }
+        if (da >= 0.0) != (db >= 0.0) {
+            let t = da / (da - db);
+            out.push((a.0.lerp(b.0, t), a.1.lerp(b.1, t)));
+        }
+    }
+    out
+}

@@ -1,0 +1,104 @@
+//! The current solution, encoded once per version and shared by every viewer.
+//!
+//! A `watch` channel holds only the newest [`Published`] state: a viewer that falls behind
+//! skips straight to it, so a slow viewer never queues frames or slows the others.
+
+use bytes::Bytes;
+use std::sync::Arc;
+use std::time::{SystemTime, UNIX_EPOCH};
+use tokio::sync::watch;
+use wire::{DeltaFrame, FrameInfo, FullFrame, Geometry, Hello, PROTOCOL_VERSION, ServerMessage};
+
+/// One version of the solution, with its frames already encoded.
+#[derive(Debug)]
+pub struct Published {
+    /// Solution version (starts at 1, one per publish).
+    pub version: u64,
+    /// Whether the solver had converged.
+    pub is_final: bool,
+    /// The RGB9E5 codes.
+    pub colours: Arc<Vec<u32>>,
+    /// The frame scale (W/m^2 per decoded unit).
+    pub scale: f32,
+    /// The encoded full frame.
+    pub full: Bytes,
+    /// The encoded delta from the previous version, when the scale stayed the same.
+    pub delta: Option<(u64, Bytes)>,
+    /// [`wire::checksum`] of `colours`.
+    pub checksum: u32,
+}
+
+/// Publishes solution versions and hands them to viewers.
+pub struct Hub {
+    sender: watch::Sender<Arc<Published>>,
+    /// The encoded hello every viewer gets first.
+    pub hello: Bytes,
+    /// The encoded geometry served at `/api/scene`.
+    pub geometry: Bytes,
+    /// Identifies scene content and solve settings.
+    pub scene_id: u64,
+    /// Patches per frame.
+    pub patch_count: u32,
+}
+
+fn now_micros() -> u64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_micros() as u64)
+}
+
+fn encode(radiosity: &[[f32; 3]]) -> (f32, Vec<u32>) {
+    let brightest = radiosity.iter().flatten().copied().filter(|c| c.is_finite()).fold(0.0, f32::max);
+    let scale = wire::scale_for(brightest);
+    (scale, radiosity.iter().map(|rgb| wire::encode_colour(*rgb, scale)).collect())
+}
+
+impl Hub {
+    /// A hub for `geometry`, publishing `initial` (non-final) as version 1.
+    pub fn new(scene_id: u64, geometry: &Geometry, initial: &[[f32; 3]]) -> Hub {
+        let patch_count = geometry.patches.len() as u32;
+        let hello = Hello { protocol_version: PROTOCOL_VERSION, scene_id, geometry_version: 1, patch_count };
+        let (scale, colours) = encode(initial);
+        let first = Self::frames(1, false, scale, colours, None);
+        Hub {
+            sender: watch::Sender::new(Arc::new(first)),
+            hello: ServerMessage::Hello(hello).encode().into(),
+            geometry: geometry.encode().into(),
+            scene_id,
+            patch_count,
+        }
+    }
+
+    fn frames(version: u64, is_final: bool, scale: f32, colours: Vec<u32>, previous: Option<&Published>) -> Published {
+        let info = FrameInfo { solution_version: version, sent_at_unix_micros: now_micros(), scale, patch_count: colours.len() as u32, is_final };
+        let delta = previous.filter(|p| p.scale == scale).map(|p| {
+            let (indices, changed) = wire::changes(&p.colours, &colours);
+            let frame = DeltaFrame { base_version: p.version, info, indices, colours: changed };
+            (p.version, Bytes::from(ServerMessage::Delta(frame).encode()))
+        });
+        let full = Bytes::from(ServerMessage::Full(FullFrame { info, colours: colours.clone() }).encode());
+        Published { version, is_final, checksum: wire::checksum(&colours), colours: Arc::new(colours), scale, full, delta }
+    }
+
+    /// Publishes a new state (radiosity in W/m^2) unless it encodes to what viewers already
+    /// have; returns the version viewers will hold.
+    pub fn publish(&self, radiosity: &[[f32; 3]], is_final: bool) -> u64 {
+        let (scale, colours) = encode(radiosity);
+        let previous = self.current();
+        if previous.scale == scale && *previous.colours == colours && previous.is_final == is_final {
+            return previous.version;
+        }
+        let next = Self::frames(previous.version + 1, is_final, scale, colours, Some(&previous));
+        let version = next.version;
+        self.sender.send_replace(Arc::new(next));
+        version
+    }
+
+    /// The newest state.
+    pub fn current(&self) -> Arc<Published> {
+        self.sender.borrow().clone()
+    }
+
+    /// A receiver that wakes on every publish (skipping to the newest).
+    pub fn subscribe(&self) -> watch::Receiver<Arc<Published>> {
+        self.sender.subscribe()
+    }
+}

@@ -1,0 +1,93 @@
+//! Counters for `/metrics`, in the Prometheus text format.
+
+use std::fmt::Write;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Why the server closed a viewer's connection.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DropReason {
+    /// A send did not complete within the send timeout: the viewer stopped reading.
+    Slow,
+    /// The viewer sent something that is not a protocol message, or too large a one.
+    BadMessage,
+    /// Nothing (not even a pong) arrived within the idle timeout.
+    Idle,
+}
+
+impl DropReason {
+    const ALL: [DropReason; 3] = [DropReason::Slow, DropReason::BadMessage, DropReason::Idle];
+
+    fn label(self) -> &'static str {
+        match self {
+            DropReason::Slow => "slow",
+            DropReason::BadMessage => "bad_message",
+            DropReason::Idle => "idle",
+        }
+    }
+}
+
+/// The server's counters; all updates are lock-free except the solve timings.
+#[derive(Debug, Default)]
+pub struct Metrics {
+    /// Viewers connected now.
+    pub viewers: AtomicU64,
+    /// Viewers refused because the connection limit was reached.
+    pub refused: AtomicU64,
+    /// Frames (full and delta) sent.
+    pub frames_sent: AtomicU64,
+    /// Bytes of frames sent.
+    pub bytes_sent: AtomicU64,
+    /// Versions a viewer never saw because a newer one replaced them first.
+    pub versions_skipped: AtomicU64,
+    /// Full frames sent where a delta could not be used (skips, resyncs, scale changes).
+    pub full_resyncs: AtomicU64,
+    dropped: [AtomicU64; 3],
+    /// Seconds per solve stage, once the solve is done.
+    pub solve_seconds: Mutex<Vec<(&'static str, f64)>>,
+}
+
+impl Metrics {
+    /// Counts a dropped viewer.
+    pub fn dropped(&self, reason: DropReason) {
+        self.dropped[reason as usize].fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Viewers dropped for `reason` so far.
+    pub fn dropped_count(&self, reason: DropReason) -> u64 {
+        self.dropped[reason as usize].load(Ordering::Relaxed)
+    }
+
+    /// Counts one sent frame of `bytes` bytes.
+    pub fn sent(&self, bytes: usize) {
+        self.frames_sent.fetch_add(1, Ordering::Relaxed);
+        self.bytes_sent.fetch_add(bytes as u64, Ordering::Relaxed);
+    }
+
+    /// The text served at `/metrics`.
+    pub fn render(&self, patches: u32, solution_version: u64, is_final: bool) -> String {
+        let mut out = String::new();
+        let mut metric = |name: &str, kind: &str, help: &str, samples: &[(String, f64)]| {
+            let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} {kind}");
+            for (labels, value) in samples {
+                let _ = writeln!(out, "{name}{labels} {value}");
+            }
+        };
+        let plain = |v: u64| vec![(String::new(), v as f64)];
+        let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        metric("radcast_viewers", "gauge", "Viewers connected now.", &plain(get(&self.viewers)));
+        metric("radcast_viewers_refused_total", "counter", "Connections refused at the viewer limit.", &plain(get(&self.refused)));
+        let dropped: Vec<_> = DropReason::ALL.iter().map(|r| (format!("{{reason=\"{}\"}}", r.label()), self.dropped_count(*r) as f64)).collect();
+        metric("radcast_viewers_dropped_total", "counter", "Viewers disconnected by the server, by reason.", &dropped);
+        metric("radcast_frames_sent_total", "counter", "Frames sent to viewers.", &plain(get(&self.frames_sent)));
+        metric("radcast_bytes_sent_total", "counter", "Frame bytes sent to viewers.", &plain(get(&self.bytes_sent)));
+        metric("radcast_versions_skipped_total", "counter", "Solution versions a slow viewer skipped.", &plain(get(&self.versions_skipped)));
+        metric("radcast_full_resyncs_total", "counter", "Full frames sent where a delta did not apply.", &plain(get(&self.full_resyncs)));
+        metric("radcast_patches", "gauge", "Patches per frame.", &plain(patches as u64));
+        metric("radcast_solution_version", "gauge", "Current solution version.", &plain(solution_version));
+        metric("radcast_solution_final", "gauge", "1 once the solver converged.", &plain(is_final as u64));
+        let stages: Vec<_> = self.solve_seconds.lock().map(|s| s.iter().map(|(stage, v)| (format!("{{stage=\"{stage}\"}}"), *v)).collect()).unwrap_or_default();
+        metric("radcast_solve_seconds", "gauge", "Seconds per solve stage.", &stages);
+        out
+    }
+}

@@ -1,0 +1,81 @@
+//! HTTP routes; each handler is a thin wrapper over plain data in [`Shared`].
+
+use crate::Shared;
+use crate::viewer::{serve_viewer, try_admit};
+use axum::Router;
+use axum::extract::State;
+use axum::extract::ws::WebSocketUpgrade;
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use serde::Serialize;
+use std::sync::Arc;
+
+/// The router: `/healthz`, `/api/scene`, `/api/solution`, `/ws`, `/metrics`.
+pub fn router(shared: Arc<Shared>) -> Router {
+    Router::new()
+        .route("/healthz", get(|| async { "ok\n" }))
+        .route("/api/scene", get(scene))
+        .route("/api/solution", get(solution))
+        .route("/ws", get(websocket))
+        .route("/metrics", get(metrics))
+        .with_state(shared)
+}
+
+async fn scene(State(shared): State<Arc<Shared>>) -> Response {
+    ([(header::CONTENT_TYPE, "application/vnd.radcast.geometry")], shared.hub.geometry.clone()).into_response()
+}
+
+/// The body of `GET /api/solution`.
+#[derive(Serialize)]
+pub struct SolutionSummary {
+    /// Scene and settings identity (hex), as in the hello.
+    pub scene_id: String,
+    /// Patches per frame.
+    pub patch_count: u32,
+    /// Current version.
+    pub solution_version: u64,
+    /// Whether the solver converged for it.
+    pub is_final: bool,
+    /// CRC-32 of the current codes as little-endian bytes (`wire::checksum`).
+    pub checksum: u32,
+    /// The frame scale.
+    pub scale: f32,
+    /// The solver's report (`radcast solve --json`'s object) once done.
+    pub report: Option<serde_json::Value>,
+}
+
+/// The current summary, for `/api/solution` and tests.
+pub fn solution_summary(shared: &Shared) -> SolutionSummary {
+    let current = shared.hub.current();
+    SolutionSummary {
+        scene_id: format!("{:016x}", shared.hub.scene_id),
+        patch_count: shared.hub.patch_count,
+        solution_version: current.version,
+        is_final: current.is_final,
+        checksum: current.checksum,
+        scale: current.scale,
+        report: shared.report.lock().ok().and_then(|r| r.clone()),
+    }
+}
+
+async fn solution(State(shared): State<Arc<Shared>>) -> Response {
+    axum::Json(solution_summary(&shared)).into_response()
+}
+
+async fn metrics(State(shared): State<Arc<Shared>>) -> Response {
+    let current = shared.hub.current();
+    let text = shared.metrics.render(shared.hub.patch_count, current.version, current.is_final);
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
+}
+
+async fn websocket(State(shared): State<Arc<Shared>>, upgrade: WebSocketUpgrade) -> Response {
+    let Some(slot) = try_admit(&shared) else {
+        return (StatusCode::SERVICE_UNAVAILABLE, "radcast-server: viewer limit reached\n").into_response();
+    };
+    let limits = shared.limits;
+    upgrade
+        .max_message_size(limits.max_message_bytes)
+        .max_frame_size(limits.max_message_bytes)
+        .on_upgrade(move |socket| serve_viewer(socket, slot))
+}

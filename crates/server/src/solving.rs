@@ -1,0 +1,157 @@
+//! Loading, meshing and solving for the server, with a disk cache of finished solutions.
+
+use crate::Shared;
+use crate::hub::Hub;
+use anyhow::Context;
+use bincode::{Decode, Encode};
+use glam::DVec3;
+use sha2::{Digest, Sha256};
+use solver::{Mesh, Progress, Rgb, Scene, SolveRequest};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use wire::{Camera, Geometry, geometry::NO_CORNER};
+
+/// A scene loaded and meshed, ready to solve.
+pub struct Prepared {
+    /// The scene.
+    pub scene: Scene,
+    /// Its patches (what the server streams).
+    pub mesh: Mesh,
+    /// How to solve it.
+    pub request: SolveRequest,
+    /// Hash of the scene files and settings.
+    pub scene_id: u64,
+    /// The geometry viewers fetch.
+    pub geometry: Geometry,
+}
+
+/// Progressive frames are published at most this often while the solver iterates.
+const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(100);
+
+/// Loads and meshes `scene_path`; fails with the loader's message on bad input.
+pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepared> {
+    let scene = Scene::load_obj(scene_path)?;
+    let mesh = Mesh::build(&scene, request.patches);
+    let scene_id = scene_id(scene_path, &request)?;
+    let geometry = geometry_of(&scene, &mesh);
+    Ok(Prepared { scene, mesh, request, scene_id, geometry })
+}
+
+/// First 8 bytes of SHA-256 over the OBJ, its MTL libraries, the settings and this version.
+fn scene_id(scene_path: &Path, request: &SolveRequest) -> anyhow::Result<u64> {
+    let mut hasher = Sha256::new();
+    let text = std::fs::read(scene_path).with_context(|| format!("{}: cannot read", scene_path.display()))?;
+    hasher.update(&text);
+    let folder = scene_path.parent().unwrap_or(Path::new("."));
+    for line in String::from_utf8_lossy(&text).lines() {
+        if let Some(name) = line.trim().strip_prefix("mtllib ") {
+            hasher.update(std::fs::read(folder.join(name.trim())).unwrap_or_default());
+        }
+    }
+    hasher.update(format!("{request:?} {}", env!("CARGO_PKG_VERSION")));
+    let digest = hasher.finalize();
+    Ok(u64::from_le_bytes(digest[..8].try_into().expect("SHA-256 has 32 bytes")))
+}
+
+fn geometry_of(scene: &Scene, mesh: &Mesh) -> Geometry {
+    let to_f32 = |v: DVec3| v.as_vec3().to_array();
+    Geometry {
+        positions: mesh.positions.iter().map(|p| to_f32(*p)).collect(),
+        patches: mesh.patches.iter().map(|p| if p.corner_count() == 4 { p.corners } else { [p.corners[0], p.corners[1], p.corners[2], NO_CORNER] }).collect(),
+        patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
+        objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
+        camera: scene.view.map(|v| Camera { eye: to_f32(v.eye), target: to_f32(v.target), up: to_f32(v.up), vertical_fov_degrees: v.vertical_fov_degrees as f32 }),
+    }
+}
+
+fn to_f32(radiosity: &[Rgb]) -> Vec<[f32; 3]> {
+    radiosity.iter().map(|b| b.as_vec3().to_array()).collect()
+}
+
+/// The state viewers see before the solve: every patch at its own emission.
+pub fn emission_only(prepared: &Prepared) -> Vec<[f32; 3]> {
+    to_f32(&prepared.mesh.patches.iter().map(|p| p.emission).collect::<Vec<_>>())
+}
+
+/// Creates the hub for `prepared`, publishing its emission-only state.
+pub fn hub_for(prepared: &Prepared) -> Hub {
+    Hub::new(prepared.scene_id, &prepared.geometry, &emission_only(prepared))
+}
+
+#[derive(Encode, Decode)]
+struct CachedSolution {
+    radiosity: Vec<[f32; 3]>,
+    report_json: String,
+}
+
+const CACHE_MAGIC: &[u8; 8] = b"RCCACHE1";
+
+fn cache_path(dir: &Path, scene_id: u64) -> PathBuf {
+    dir.join(format!("{scene_id:016x}.radcast"))
+}
+
+fn read_cache(path: &Path, patch_count: usize) -> Option<CachedSolution> {
+    let bytes = std::fs::read(path).ok()?;
+    let body = bytes.strip_prefix(CACHE_MAGIC.as_slice())?;
+    let (cached, _): (CachedSolution, usize) = bincode::decode_from_slice(body, bincode::config::standard()).ok()?;
+    (cached.radiosity.len() == patch_count && cached.radiosity.iter().flatten().all(|c| c.is_finite() && *c >= 0.0)).then_some(cached)
+}
+
+/// Writes atomically: a temporary file in the same folder, renamed over the target.
+fn write_cache(dir: &Path, path: &Path, cached: &CachedSolution) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let mut file = tempfile::NamedTempFile::new_in(dir)?;
+    file.write_all(CACHE_MAGIC)?;
+    bincode::encode_into_std_write(cached, &mut file, bincode::config::standard())?;
+    file.as_file().sync_all()?;
+    file.persist(path).with_context(|| format!("{}: cannot write", path.display()))?;
+    Ok(())
+}
+
+/// Solves (or reads the cache), publishing progressive frames and then the final one.
+/// Blocking: run it on a blocking thread.
+pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option<&Path>) -> anyhow::Result<()> {
+    let hub = &shared.hub;
+    let cache = cache_dir.map(|dir| (dir, cache_path(dir, prepared.scene_id)));
+    if let Some(cached) = cache.as_ref().and_then(|(_, path)| read_cache(path, prepared.mesh.patches.len())) {
+        tracing::info!("solution read from the cache");
+        hub.publish(&cached.radiosity, true);
+        *shared.report.lock().expect("report lock") = serde_json::from_str(&cached.report_json).ok();
+        return Ok(());
+    }
+    let last_snapshot = Mutex::new(Instant::now());
+    let progress = |p: Progress| {
+        if let Progress::Estimate { radiosity } = p
+            && let Ok(mut last) = last_snapshot.try_lock()
+            && last.elapsed() >= SNAPSHOT_INTERVAL
+        {
+            *last = Instant::now();
+            hub.publish(&to_f32(radiosity), false);
+        }
+    };
+    let (radiosity, report) = solver::solve_mesh(&prepared.scene, &prepared.mesh, &prepared.request, &progress)?;
+    let radiosity = to_f32(&radiosity);
+    hub.publish(&radiosity, true);
+    let s = report.seconds;
+    *shared.metrics.solve_seconds.lock().expect("metrics lock") = vec![("mesh", s.mesh), ("form_factors", s.form_factors), ("solve", s.solve), ("total", s.total)];
+    tracing::info!(patches = report.patches, iterations = report.iterations, residual = report.residual, seconds = s.total, "solved");
+    let report_json = serde_json::to_string(&report)?;
+    *shared.report.lock().expect("report lock") = serde_json::from_str(&report_json).ok();
+    if let Some((dir, path)) = cache {
+        write_cache(dir, &path, &CachedSolution { radiosity, report_json })?;
+    }
+    Ok(())
+}
+
+/// Everything a server needs for one scene: the shared state, ready for [`crate::routes::router`].
+pub fn shared_for(prepared: &Prepared, limits: crate::Limits) -> Arc<Shared> {
+    Arc::new(Shared {
+        hub: Arc::new(hub_for(prepared)),
+        metrics: Default::default(),
+        limits,
+        shutdown: Default::default(),
+        report: Mutex::new(None),
+    })
+}

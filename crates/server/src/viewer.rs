@@ -1,0 +1,132 @@
+//! One viewer's connection: hello, the current frame, then every newer version (as a delta
+//! when the viewer holds its base), until the viewer leaves, misbehaves or stalls.
+
+use crate::metrics::{DropReason, Metrics};
+use crate::Shared;
+use axum::extract::ws::{CloseFrame, Message, WebSocket, close_code};
+use bytes::Bytes;
+use futures_util::{SinkExt, StreamExt};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use tokio::time::{Instant, interval, timeout};
+use wire::ClientMessage;
+
+/// A claimed place under the viewer limit; released however the connection ends, including
+/// an upgrade that never completes.
+pub struct ViewerSlot(Arc<Shared>);
+
+impl Drop for ViewerSlot {
+    fn drop(&mut self) {
+        self.0.metrics.viewers.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+/// Claims a viewer slot, or `None` at the limit (counted as refused).
+pub fn try_admit(shared: &Arc<Shared>) -> Option<ViewerSlot> {
+    let metrics: &Metrics = &shared.metrics;
+    let limit = shared.limits.max_viewers as u64;
+    match metrics.viewers.fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| (n < limit).then_some(n + 1)) {
+        Ok(_) => Some(ViewerSlot(shared.clone())),
+        Err(_) => {
+            metrics.refused.fetch_add(1, Ordering::Relaxed);
+            None
+        }
+    }
+}
+
+/// What ended a session.
+enum End {
+    Left,
+    Dropped(DropReason, &'static str),
+    Shutdown,
+}
+
+/// Runs one admitted viewer to the end.
+pub async fn serve_viewer(socket: WebSocket, slot: ViewerSlot) {
+    let shared = slot.0.clone();
+    let metrics = &shared.metrics;
+    let (mut sink, mut stream) = socket.split();
+    let limits = shared.limits;
+    let mut updates = shared.hub.subscribe();
+    let sent = |bytes: &Bytes| metrics.sent(bytes.len());
+
+    let end = 'session: {
+        let first = updates.borrow_and_update().clone();
+        for bytes in [shared.hub.hello.clone(), first.full.clone()] {
+            sent(&bytes);
+            if !matches!(timeout(limits.send_timeout, sink.send(Message::Binary(bytes))).await, Ok(Ok(()))) {
+                break 'session End::Dropped(DropReason::Slow, "send timed out");
+            }
+        }
+        let mut held = first.version;
+        let mut last_heard = Instant::now();
+        let mut ping = interval(limits.ping_interval);
+        ping.tick().await;
+        loop {
+            let outgoing = tokio::select! {
+                changed = updates.changed() => {
+                    if changed.is_err() {
+                        break 'session End::Shutdown;
+                    }
+                    let newest = updates.borrow_and_update().clone();
+                    let bytes = match &newest.delta {
+                        Some((base, delta)) if *base == held => delta.clone(),
+                        _ => {
+                            metrics.versions_skipped.fetch_add(newest.version.saturating_sub(held + 1), Ordering::Relaxed);
+                            metrics.full_resyncs.fetch_add(1, Ordering::Relaxed);
+                            newest.full.clone()
+                        }
+                    };
+                    held = newest.version;
+                    Message::Binary(bytes)
+                }
+                incoming = stream.next() => {
+                    last_heard = Instant::now();
+                    match incoming {
+                        Some(Ok(Message::Binary(bytes))) => match ClientMessage::decode(&bytes) {
+                            Ok(ClientMessage::RequestFull) => {
+                                let newest = updates.borrow_and_update().clone();
+                                held = newest.version;
+                                metrics.full_resyncs.fetch_add(1, Ordering::Relaxed);
+                                Message::Binary(newest.full.clone())
+                            }
+                            Err(_) => break 'session End::Dropped(DropReason::BadMessage, "not a radcast message"),
+                        },
+                        Some(Ok(Message::Text(_))) => break 'session End::Dropped(DropReason::BadMessage, "text messages are not part of the protocol"),
+                        Some(Ok(Message::Ping(_) | Message::Pong(_))) => continue,
+                        Some(Ok(Message::Close(_))) | None => break 'session End::Left,
+                        // Oversized or malformed WebSocket frames surface here.
+                        Some(Err(_)) => break 'session End::Dropped(DropReason::BadMessage, "malformed or oversized message"),
+                    }
+                }
+                _ = ping.tick() => {
+                    if last_heard.elapsed() > limits.idle_timeout {
+                        break 'session End::Dropped(DropReason::Idle, "idle timeout");
+                    }
+                    Message::Ping(Bytes::new())
+                }
+                _ = shared.shutdown.cancelled() => break 'session End::Shutdown,
+            };
+            if let Message::Binary(bytes) = &outgoing {
+                sent(bytes);
+            }
+            if !matches!(timeout(limits.send_timeout, sink.send(outgoing)).await, Ok(Ok(()))) {
+                break 'session End::Dropped(DropReason::Slow, "send timed out");
+            }
+        }
+    };
+    let close = |code, reason: &str| Message::Close(Some(CloseFrame { code, reason: reason.into() }));
+    let farewell = match end {
+        End::Left => None,
+        End::Dropped(reason, text) => {
+            metrics.dropped(reason);
+            let code = if reason == DropReason::BadMessage { close_code::POLICY } else { close_code::AWAY };
+            Some(close(code, text))
+        }
+        End::Shutdown => Some(close(close_code::AWAY, "server shutting down")),
+    };
+    if let Some(message) = farewell {
+        // Best effort: a stalled viewer may not take even this.
+        let _ = timeout(limits.send_timeout, sink.send(message)).await;
+    }
+}

@@ -1,0 +1,262 @@
+//! The server and viewers over real sockets on loopback: one solve, many viewers.
+
+use futures_util::{SinkExt, StreamExt};
+use server::hub::Hub;
+use server::solving::{prepare, shared_for, solve_and_publish};
+use server::{Limits, Shared, routes};
+use solver::{PatchTarget, SolveRequest};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+use tokio_tungstenite::tungstenite::Message;
+use wire::{ClientMessage, Geometry, PatchBuffer, ServerMessage};
+
+/// Generous bound on waits that normally take milliseconds; a hang fails instead of blocking CI.
+const PATIENCE: Duration = Duration::from_secs(60);
+
+async fn serve(shared: Arc<Shared>) -> SocketAddr {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind an ephemeral port");
+    let address = listener.local_addr().unwrap();
+    let stop = shared.shutdown.clone();
+    tokio::spawn(async move { axum::serve(listener, routes::router(shared)).with_graceful_shutdown(async move { stop.cancelled().await }).await });
+    address
+}
+
+/// Serves the Cornell box, solving in the background; returns before the solve ends.
+async fn cornell_server(limits: Limits) -> (SocketAddr, Arc<Shared>) {
+    let request = SolveRequest { patches: PatchTarget::Count(400), ..SolveRequest::default() };
+    let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).expect("scene loads");
+    let shared = shared_for(&prepared, limits);
+    let address = serve(shared.clone()).await;
+    let solving = shared.clone();
+    tokio::task::spawn_blocking(move || solve_and_publish(&prepared, &solving, None).expect("solves"));
+    (address, shared)
+}
+
+/// A server over a synthetic geometry of `patches` triangles, for tests that publish by hand.
+async fn synthetic_server(patches: u32, limits: Limits) -> (SocketAddr, Arc<Shared>) {
+    let geometry = Geometry {
+        positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        patches: vec![[0, 1, 2, wire::geometry::NO_CORNER]; patches as usize],
+        patch_objects: vec![0; patches as usize],
+        objects: vec!["plate".into()],
+        camera: None,
+    };
+    let hub = Hub::new(7, &geometry, &vec![[0.0; 3]; patches as usize]);
+    let shared = Arc::new(Shared { hub: Arc::new(hub), metrics: Default::default(), limits, shutdown: Default::default(), report: Default::default() });
+    (serve(shared.clone()).await, shared)
+}
+
+/// Deterministic noise radiosity, different for every `seed`, so frames do not compress.
+fn noise(patches: u32, seed: u64) -> Vec<[f32; 3]> {
+    (0..patches as u64)
+        .map(|i| {
+            let x = (i.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(seed.wrapping_mul(1_442_695_040_888_963_407)) >> 40) as f32;
+            [x, x * 0.5 + 1.0, 1.0 + seed as f32]
+        })
+        .collect()
+}
+
+type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+async fn connect(address: SocketAddr) -> Socket {
+    tokio_tungstenite::connect_async(format!("ws://{address}/ws")).await.expect("connects").0
+}
+
+async fn next_message(socket: &mut Socket) -> ServerMessage {
+    loop {
+        match tokio::time::timeout(PATIENCE, socket.next()).await.expect("a message in time") {
+            Some(Ok(Message::Binary(bytes))) => return ServerMessage::decode(&bytes).expect("decodes"),
+            Some(Ok(Message::Ping(_) | Message::Pong(_))) => continue,
+            other => panic!("expected a binary message, got {other:?}"),
+        }
+    }
+}
+
+/// Reads frames until the buffer holds `version` (or a final frame when `None`).
+async fn follow(socket: &mut Socket, until: Option<u64>) -> PatchBuffer {
+    let mut buffer = PatchBuffer::default();
+    assert!(matches!(next_message(socket).await, ServerMessage::Hello(_)));
+    loop {
+        let message = next_message(socket).await;
+        if buffer.apply(&message).is_err() {
+            socket.send(Message::Binary(ClientMessage::RequestFull.encode().into())).await.unwrap();
+            continue;
+        }
+        let info = buffer.info.unwrap();
+        if until.map_or(info.is_final, |v| info.solution_version == v) {
+            return buffer;
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn several_viewers_end_with_the_servers_buffer() {
+    let (address, shared) = cornell_server(Limits::default()).await;
+    let url = format!("ws://{address}/ws");
+    let viewers: Vec<_> = (0..6)
+        .map(|_| {
+            let url = url.clone();
+            tokio::spawn(async move { client::session::watch_until_final(&url, PATIENCE).await })
+        })
+        .collect();
+    let mut checksums = Vec::new();
+    for viewer in viewers {
+        checksums.push(wire::checksum(&viewer.await.unwrap().expect("viewer finishes").buffer.colours));
+    }
+    let summary = routes::solution_summary(&shared);
+    assert!(summary.is_final);
+    assert!(checksums.iter().all(|c| *c == summary.checksum), "{checksums:?} vs {}", summary.checksum);
+    // The same summary over HTTP, as a viewer in another language would read it.
+    let base = client::http_base(&url).unwrap();
+    let json = tokio::task::spawn_blocking(move || client::fetch_solution(&base)).await.unwrap().unwrap();
+    assert_eq!(json["checksum"].as_u64(), Some(summary.checksum as u64));
+    assert_eq!(json["report"]["method"], "gmres");
+}
+
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_late_joiner_gets_the_current_state_at_once() {
+    let (address, shared) = synthetic_server(100, Limits::default()).await;
+    shared.hub.publish(&noise(100, 1), false);
+    let version = shared.hub.publish(&noise(100, 2), true);
+    let mut socket = connect(address).await;
+    let ServerMessage::Hello(hello) = next_message(&mut socket).await else { panic!("hello first") };
+    assert_eq!((hello.patch_count, hello.scene_id), (100, 7));
+    // The very next message is the whole current state, final.
+    let ServerMessage::Full(frame) = next_message(&mut socket).await else { panic!("a full frame second") };
+    assert_eq!((frame.info.solution_version, frame.info.is_final), (version, true));
+    assert_eq!(wire::checksum(&frame.colours), shared.hub.current().checksum);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn later_versions_arrive_as_deltas_of_only_the_changed_patches() {
+    let (address, shared) = synthetic_server(1000, Limits::default()).await;
+    let mut base = vec![[1.0f32; 3]; 1000];
+    base[0] = [5.0, 5.0, 5.0];
+    let first = shared.hub.publish(&base, false);
+    let mut socket = connect(address).await;
+    let mut buffer = follow(&mut socket, Some(first)).await;
+    // Same brightest value, so the same scale: only the two changed codes travel.
+    let mut next = base.clone();
+    next[10] = [3.0, 1.0, 1.0];
+    next[900] = [4.0, 2.0, 1.0];
+    let version = shared.hub.publish(&next, true);
+    let ServerMessage::Delta(delta) = next_message(&mut socket).await else { panic!("a delta") };
+    assert_eq!(delta.indices, [10, 900]);
+    buffer.apply(&ServerMessage::Delta(delta)).unwrap();
+    assert_eq!(buffer.info.unwrap().solution_version, version);
+    assert_eq!(wire::checksum(&buffer.colours), shared.hub.current().checksum);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stalled_viewer_neither_delays_others_nor_holds_memory() {
+    let limits = Limits { send_timeout: Duration::from_millis(300), ..Limits::default() };
+    let patches = 50_000; // 200 KB frames: socket buffers fill after a few dozen
+    let (address, shared) = synthetic_server(patches, limits).await;
+    // The stalled viewer completes the handshake and then never reads.
+    let _stalled = connect(address).await;
+    let mut healthy = connect(address).await;
+    let mut buffer = follow(&mut healthy, Some(1)).await;
+    for seed in 0..300 {
+        let last = shared.hub.publish(&noise(patches, seed), seed == 299);
+        // The healthy viewer keeps up with every publish while the stalled one blocks.
+        while buffer.info.unwrap().solution_version < last {
+            let message = next_message(&mut healthy).await;
+            if buffer.apply(&message).is_err() {
+                healthy.send(Message::Binary(ClientMessage::RequestFull.encode().into())).await.unwrap();
+            }
+        }
+    }
+    assert_eq!(wire::checksum(&buffer.colours), shared.hub.current().checksum);
+    // The stalled viewer was dropped for it (its socket buffers full), which frees its state.
+    let metrics = &shared.metrics;
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    while metrics.dropped_count(server::metrics::DropReason::Slow) == 0 {
+        assert!(tokio::time::Instant::now() < deadline, "the stalled viewer was never dropped");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert_eq!(metrics.viewers.load(Ordering::Relaxed), 1);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn garbage_and_oversized_messages_are_refused_without_harming_others() {
+    let (address, shared) = synthetic_server(100, Limits::default()).await;
+    let mut healthy = connect(address).await;
+    follow(&mut healthy, Some(1)).await;
+    for hostile in [Message::Text("hello".into()), Message::Binary(vec![0xFF; 3].into()), Message::Binary(vec![16u8; 100_000].into())] {
+        let mut socket = connect(address).await;
+        socket.send(hostile).await.unwrap();
+        // The server closes it with a reason; nothing else.
+        let closed = loop {
+            match tokio::time::timeout(PATIENCE, socket.next()).await.expect("closed in time") {
+                Some(Ok(Message::Close(frame))) => break frame,
+                Some(Ok(_)) => continue,
+                Some(Err(_)) | None => break None,
+            }
+        };
+        if let Some(frame) = closed {
+            assert!(!frame.reason.is_empty());
+        }
+    }
+    let metrics = &shared.metrics;
+    assert_eq!(metrics.dropped_count(server::metrics::DropReason::BadMessage), 3);
+    // The healthy viewer still gets new versions.
+    let version = shared.hub.publish(&noise(100, 3), true);
+    let buffer = follow_delta_or_full(&mut healthy, version).await;
+    assert_eq!(wire::checksum(&buffer), shared.hub.current().checksum);
+}
+
+/// Reads until a frame of `version` arrives and returns its full colours (via a resync if
+/// needed, since this helper holds no earlier buffer).
+async fn follow_delta_or_full(socket: &mut Socket, version: u64) -> Vec<u32> {
+    socket.send(Message::Binary(ClientMessage::RequestFull.encode().into())).await.unwrap();
+    loop {
+        if let ServerMessage::Full(frame) = next_message(socket).await
+            && frame.info.solution_version == version
+        {
+            return frame.colours;
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn viewers_past_the_limit_are_refused_cleanly() {
+    let (address, shared) = synthetic_server(10, Limits { max_viewers: 2, ..Limits::default() }).await;
+    let _a = connect(address).await;
+    let _b = connect(address).await;
+    let refused = tokio_tungstenite::connect_async(format!("ws://{address}/ws")).await.expect_err("third is refused");
+    assert!(refused.to_string().contains("503"), "{refused}");
+    assert_eq!(shared.metrics.refused.load(Ordering::Relaxed), 1);
+    let text = shared.metrics.render(10, 1, false);
+    assert!(text.contains("radcast_viewers 2\n") && text.contains("radcast_viewers_refused_total 1\n"), "{text}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_rendered_cornell_box_has_red_left_and_green_right() {
+    let (address, _shared) = cornell_server(Limits::default()).await;
+    let url = format!("ws://{address}/ws");
+    let outcome = client::session::watch_until_final(&url, PATIENCE).await.expect("final frame");
+    let base = client::http_base(&url).unwrap();
+    let geometry = tokio::task::spawn_blocking(move || client::fetch_geometry(&base)).await.unwrap().unwrap();
+    let view = client::render::View::for_scene(&geometry);
+    assert_eq!(view.eye.to_array(), [278.0, 273.0, -800.0], "the published Cornell camera");
+    let image = client::render::render(&geometry, &outcome.buffer, &view, 128, 128);
+    let mean = |x0: u32, x1: u32| {
+        let mut sum = [0.0f64; 3];
+        for y in 40..88 {
+            for x in x0..x1 {
+                let p = image.pixel(x, y);
+                (0..3).for_each(|c| sum[c] += p[c] as f64);
+            }
+        }
+        sum.map(|s| s / ((x1 - x0) * 48) as f64)
+    };
+    let (left, right) = (mean(4, 20), mean(108, 124));
+    assert!(left[0] > 2.0 * left[1] && left[0] > 2.0 * left[2] && left[0] > 60.0, "left wall {left:?}");
+    // Green dominates; the tone curve compresses the linear G/R of about 2.2 to about 1.35.
+    assert!(right[1] > 1.25 * right[0] && right[1] > 2.0 * right[2] && right[1] > 60.0, "right wall {right:?}");
+    let brightness = image.rgb.iter().map(|&b| b as f64).sum::<f64>() / image.rgb.len() as f64;
+    assert!(brightness > 40.0, "the image is too dark: {brightness}");
+}
