@@ -113,6 +113,8 @@ async fn several_viewers_end_with_the_servers_buffer() {
     let json = tokio::task::spawn_blocking(move || client::fetch_solution(&base)).await.unwrap().unwrap();
     assert_eq!(json["checksum"].as_u64(), Some(summary.checksum as u64));
     assert_eq!(json["report"]["method"], "gmres");
+    let glb = tokio::task::spawn_blocking(move || client::http_get(&format!("http://{address}/api/scene.glb"), 1 << 26)).await.unwrap().unwrap();
+    assert_eq!(&glb[..4], b"glTF");
 }
 
 
@@ -259,4 +261,33 @@ async fn the_rendered_cornell_box_has_red_left_and_green_right() {
     assert!(right[1] > 1.25 * right[0] && right[1] > 2.0 * right[2] && right[1] > 60.0, "right wall {right:?}");
     let brightness = image.rgb.iter().map(|&b| b as f64).sum::<f64>() / image.rgb.len() as f64;
     assert!(brightness > 40.0, "the image is too dark: {brightness}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_restart_serves_the_cached_solution_and_ignores_a_corrupt_cache() {
+    let cache = tempfile::tempdir().unwrap();
+    let request = SolveRequest { patches: PatchTarget::Count(150), ..SolveRequest::default() };
+    let solve_once = |cache: std::path::PathBuf| {
+        tokio::task::spawn_blocking(move || {
+            let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).unwrap();
+            let shared = shared_for(&prepared, Limits::default());
+            solve_and_publish(&prepared, &shared, Some(&cache)).unwrap();
+            routes::solution_summary(&shared)
+        })
+    };
+    let first = solve_once(cache.path().into()).await.unwrap();
+    let files: Vec<_> = std::fs::read_dir(cache.path()).unwrap().map(|e| e.unwrap().path()).collect();
+    assert_eq!(files.len(), 1, "one cache file and no temporary leftovers: {files:?}");
+    let second = solve_once(cache.path().into()).await.unwrap();
+    assert_eq!((second.checksum, second.is_final), (first.checksum, true));
+    assert_eq!(second.report, first.report);
+    // A truncated cache file is not trusted: the server solves again and rewrites it.
+    let length = std::fs::metadata(&files[0]).unwrap().len();
+    std::fs::OpenOptions::new().write(true).open(&files[0]).unwrap().set_len(length / 2).unwrap();
+    let third = solve_once(cache.path().into()).await.unwrap();
+    assert_eq!(third.checksum, first.checksum);
+    assert_ne!(third.report, first.report, "a fresh solve has fresh timings");
+    // ...and the rewritten file serves the next start.
+    let fourth = solve_once(cache.path().into()).await.unwrap();
+    assert_eq!((fourth.checksum, &fourth.report), (first.checksum, &third.report));
 }

@@ -1,15 +1,10 @@
-//! A small software rasterizer: z-buffered triangles, radiosity interpolated smoothly from
-//! patches to their corners, and a documented tone map to 8-bit sRGB.
-//!
-//! Tone map: exposure `k = 0.18 / Lavg`, where `Lavg` is the area-weighted geometric mean of the
-//! patches' Rec. 709 luminance (Reinhard et al. 2002, "Photographic Tone Reproduction", eq. 1-2);
-//! each channel becomes `x / (1 + x)` with `x = k * radiosity`, then the sRGB transfer function
-//! (IEC 61966-2-1).
+//! A small software rasterizer: z-buffered triangles with radiosity interpolated smoothly from
+//! patches to their corners, tone-mapped to 8-bit sRGB as [`wire::display`] documents.
 
 use anyhow::{Context, bail};
 use glam::Vec3;
 use std::path::Path;
-use wire::geometry::NO_CORNER;
+use wire::display::{corner_radiosity, corners, exposure, srgb_byte, tone_map};
 use wire::{Geometry, PatchBuffer};
 
 /// A pinhole camera.
@@ -85,56 +80,11 @@ impl Image {
     }
 }
 
-fn corners(patch: &[u32; 4]) -> &[u32] {
-    if patch[3] == NO_CORNER { &patch[..3] } else { &patch[..] }
-}
-
-fn patch_area(geometry: &Geometry, patch: &[u32; 4]) -> f32 {
-    let p = |i: usize| Vec3::from(geometry.positions[patch[i] as usize]);
-    if patch[3] == NO_CORNER { 0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length() } else { 0.5 * (p(2) - p(0)).cross(p(3) - p(1)).length() }
-}
-
-/// Radiosity at every corner: the area-weighted mean of the patches around it. Corners are
-/// shared within a face only, so colours never blend across a crease between materials.
-pub fn corner_radiosity(geometry: &Geometry, buffer: &PatchBuffer) -> Vec<Vec3> {
-    let mut sums = vec![(Vec3::ZERO, 0.0f32); geometry.positions.len()];
-    for (i, patch) in geometry.patches.iter().enumerate() {
-        let (area, radiosity) = (patch_area(geometry, patch), Vec3::from(buffer.radiosity(i)));
-        for &c in corners(patch) {
-            sums[c as usize].0 += radiosity * area;
-            sums[c as usize].1 += area;
-        }
-    }
-    sums.into_iter().map(|(sum, area)| if area > 0.0 { sum / area } else { Vec3::ZERO }).collect()
-}
-
-/// The exposure `0.18 / Lavg` of the module docs.
-pub fn exposure(geometry: &Geometry, buffer: &PatchBuffer) -> f32 {
-    let luminance = |i: usize| Vec3::from(buffer.radiosity(i)).dot(Vec3::new(0.2126, 0.7152, 0.0722));
-    let brightest = (0..geometry.patches.len()).map(luminance).fold(0.0, f32::max);
-    if brightest <= 0.0 {
-        return 1.0;
-    }
-    let floor = 1e-4 * brightest;
-    let (mut log_sum, mut area_sum) = (0.0f64, 0.0f64);
-    for (i, patch) in geometry.patches.iter().enumerate() {
-        let area = patch_area(geometry, patch) as f64;
-        log_sum += area * (luminance(i).max(floor) as f64).ln();
-        area_sum += area;
-    }
-    (0.18 / (log_sum / area_sum.max(f64::MIN_POSITIVE)).exp()) as f32
-}
-
-fn srgb_byte(linear: f32) -> u8 {
-    let c = linear.clamp(0.0, 1.0);
-    let encoded = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
-    (encoded * 255.0 + 0.5) as u8
-}
-
 /// Renders the patches from `view`; both sides of every face are drawn.
 pub fn render(geometry: &Geometry, buffer: &PatchBuffer, view: &View, width: u32, height: u32) -> Image {
-    let colours = corner_radiosity(geometry, buffer);
-    let k = exposure(geometry, buffer);
+    let radiosity = buffer.radiosity();
+    let colours: Vec<Vec3> = corner_radiosity(geometry, &radiosity).into_iter().map(Vec3::from).collect();
+    let k = exposure(geometry, &radiosity);
     let camera = Camera::new(view, geometry, width, height);
     let mut inverse_depth = vec![0.0f32; (width * height) as usize];
     let mut linear = vec![Vec3::ZERO; (width * height) as usize];
@@ -148,7 +98,7 @@ pub fn render(geometry: &Geometry, buffer: &PatchBuffer, view: &View, width: u32
             }
         }
     }
-    let rgb = linear.iter().flat_map(|c| (*c * k).to_array().map(|x| srgb_byte(x / (1.0 + x)))).collect();
+    let rgb = linear.iter().flat_map(|c| tone_map(c.to_array(), k).map(srgb_byte)).collect();
     Image { width, height, rgb }
 }
 

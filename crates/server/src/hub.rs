@@ -35,6 +35,8 @@ pub struct Hub {
     pub hello: Bytes,
     /// The encoded geometry served at `/api/scene`.
     pub geometry: Bytes,
+    /// The same geometry, for exports.
+    pub geometry_model: Arc<Geometry>,
     /// Identifies scene content and solve settings.
     pub scene_id: u64,
     /// Patches per frame.
@@ -62,6 +64,7 @@ impl Hub {
             sender: watch::Sender::new(Arc::new(first)),
             hello: ServerMessage::Hello(hello).encode().into(),
             geometry: geometry.encode().into(),
+            geometry_model: Arc::new(geometry.clone()),
             scene_id,
             patch_count,
         }

@@ -11,11 +11,12 @@ use axum::routing::get;
 use serde::Serialize;
 use std::sync::Arc;
 
-/// The router: `/healthz`, `/api/scene`, `/api/solution`, `/ws`, `/metrics`.
+/// The router: `/healthz`, `/api/scene`, `/api/scene.glb`, `/api/solution`, `/ws`, `/metrics`.
 pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/healthz", get(|| async { "ok\n" }))
         .route("/api/scene", get(scene))
+        .route("/api/scene.glb", get(scene_glb))
         .route("/api/solution", get(solution))
         .route("/ws", get(websocket))
         .route("/metrics", get(metrics))
@@ -24,6 +25,21 @@ pub fn router(shared: Arc<Shared>) -> Router {
 
 async fn scene(State(shared): State<Arc<Shared>>) -> Response {
     ([(header::CONTENT_TYPE, "application/vnd.radcast.geometry")], shared.hub.geometry.clone()).into_response()
+}
+
+/// The current state as binary glTF, decoded from the same codes viewers hold.
+async fn scene_glb(State(shared): State<Arc<Shared>>) -> Response {
+    let current = shared.hub.current();
+    let geometry = shared.hub.geometry_model.clone();
+    let glb = tokio::task::spawn_blocking(move || {
+        let radiosity: Vec<[f32; 3]> = current.colours.iter().map(|&c| wire::decode_colour(c, current.scale)).collect();
+        wire::gltf::encode_glb(&geometry, &radiosity)
+    })
+    .await;
+    match glb {
+        Ok(bytes) => ([(header::CONTENT_TYPE, "model/gltf-binary")], bytes).into_response(),
+        Err(_) => (StatusCode::INTERNAL_SERVER_ERROR, "glTF export failed\n").into_response(),
+    }
 }
 
 /// The body of `GET /api/solution`.

@@ -223,7 +223,7 @@ impl Scene {
         let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
         let folder = path.parent().unwrap_or(Path::new("."));
         let mtl_failure = std::cell::RefCell::new(None);
-        let options = tobj::LoadOptions { triangulate: false, single_index: true, ignore_lines: true, ignore_points: true, ..Default::default() };
+        let options = tobj::LoadOptions { triangulate: false, single_index: true, ignore_lines: true, ignore_points: true };
         let loaded = tobj::load_obj_buf(&mut text.as_bytes(), &options, |mtl| {
             let mtl_path = folder.join(mtl);
             let result = tobj::load_mtl(&mtl_path);

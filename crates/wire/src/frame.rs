@@ -201,15 +201,8 @@ impl ServerMessage {
                 if payload.len() != expected {
                     return Err(DecodeError::Length { what: "full frame colours", expected, got: payload.len() });
                 }
-                let colours = payload.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
-                let info = FrameInfo {
-                    solution_version: header.solution_version,
-                    sent_at_unix_micros: header.sent_at_unix_micros,
-                    scale: check_scale(header.scale)?,
-                    patch_count: header.patch_count,
-                    is_final: flags & FLAG_FINAL != 0,
-                };
-                Ok(ServerMessage::Full(FullFrame { info, colours }))
+                let info = frame_info(header.solution_version, header.sent_at_unix_micros, header.scale, header.patch_count, flags)?;
+                Ok(ServerMessage::Full(FullFrame { info, colours: read_codes(&payload) }))
             }
             KIND_DELTA => {
                 check_flags(flags, FLAG_COMPRESSED | FLAG_FINAL)?;
@@ -225,15 +218,8 @@ impl ServerMessage {
                 if colour_bytes.len() != expected {
                     return Err(DecodeError::Length { what: "delta colours", expected, got: colour_bytes.len() });
                 }
-                let colours = colour_bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
-                let info = FrameInfo {
-                    solution_version: header.solution_version,
-                    sent_at_unix_micros: header.sent_at_unix_micros,
-                    scale: check_scale(header.scale)?,
-                    patch_count: header.patch_count,
-                    is_final: flags & FLAG_FINAL != 0,
-                };
-                Ok(ServerMessage::Delta(DeltaFrame { base_version: header.base_version, info, indices, colours }))
+                let info = frame_info(header.solution_version, header.sent_at_unix_micros, header.scale, header.patch_count, flags)?;
+                Ok(ServerMessage::Delta(DeltaFrame { base_version: header.base_version, info, indices, colours: read_codes(colour_bytes) }))
             }
             other => Err(DecodeError::UnknownKind(other)),
         }
@@ -277,8 +263,17 @@ fn check_patch_count(count: u32) -> Result<(), DecodeError> {
     if count > MAX_PATCHES { Err(DecodeError::TooLarge { what: "patch count", size: count as u64, limit: MAX_PATCHES as u64 }) } else { Ok(()) }
 }
 
-fn check_scale(scale: f32) -> Result<f32, DecodeError> {
-    if scale.is_finite() && scale > 0.0 { Ok(scale) } else { Err(DecodeError::Invalid(format!("scale {scale} must be finite and positive"))) }
+/// The frame info shared by full and delta frames, with the scale checked.
+fn frame_info(solution_version: u64, sent_at_unix_micros: u64, scale: f32, patch_count: u32, flags: u8) -> Result<FrameInfo, DecodeError> {
+    if !(scale.is_finite() && scale > 0.0) {
+        return Err(DecodeError::Invalid(format!("scale {scale} must be finite and positive")));
+    }
+    Ok(FrameInfo { solution_version, sent_at_unix_micros, scale, patch_count, is_final: flags & FLAG_FINAL != 0 })
+}
+
+/// Little-endian u32 codes (the caller has checked the length is a multiple of 4).
+fn read_codes(bytes: &[u8]) -> Vec<u32> {
+    bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
 }
 
 fn expect_end(rest: &[u8]) -> Result<(), DecodeError> {

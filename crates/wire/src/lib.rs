@@ -4,9 +4,12 @@
 //! - [`frame`]: hello, full and delta frames, and the viewer's requests.
 //! - [`geometry`]: the scene as a viewer fetches it once.
 //! - [`PatchBuffer`]: a viewer's copy of the colours, kept current by applying frames.
+//! - [`display`]: smooth shading and the tone map every consumer shares; [`gltf`]: GLB export.
 
+pub mod display;
 pub mod frame;
 pub mod geometry;
+pub mod gltf;
 pub mod rgb9e5;
 
 pub use frame::{ClientMessage, DeltaFrame, FrameInfo, FullFrame, Hello, PROTOCOL_VERSION, ServerMessage};
@@ -155,9 +158,10 @@ impl PatchBuffer {
         Ok(())
     }
 
-    /// Radiosity of patch `i`, W/m^2.
-    pub fn radiosity(&self, i: usize) -> [f32; 3] {
-        decode_colour(self.colours[i], self.info.map_or(1.0, |info| info.scale))
+    /// Radiosity of every patch, W/m^2.
+    pub fn radiosity(&self) -> Vec<[f32; 3]> {
+        let scale = self.info.map_or(1.0, |info| info.scale);
+        self.colours.iter().map(|&c| decode_colour(c, scale)).collect()
     }
 }
 
