@@ -141,6 +141,11 @@ pub fn solve(
     SolveOutcome { radiosity, iterations, residual, converged: residual <= settings.tolerance }
 }
 
+/// Channel-wise `x / y`, zero where `y` is zero (a channel with no light, or a converged one).
+fn safe_div(x: Rgb, y: Rgb) -> Rgb {
+    Rgb::select(y.cmpeq(Rgb::ZERO), Rgb::ZERO, x / y)
+}
+
 struct Run<'a> {
     transport: &'a dyn Transport,
     system: &'a System<'a>,
@@ -150,6 +155,18 @@ struct Run<'a> {
 }
 
 impl Run<'_> {
+    /// GMRES's iterate `x0 + D^-1 V y` for the cycle so far, where `H y = g` (back-substitution
+    /// on the rotated upper-triangular Hessenberg columns).
+    fn iterate(&self, start: &[Rgb], hessenberg: &[Vec<Rgb>], g: &[Rgb], basis: &[Vec<Rgb>], scale: &[f64]) -> Vec<Rgb> {
+        let m = hessenberg.len();
+        let mut y = vec![Rgb::ZERO; m];
+        for i in (0..m).rev() {
+            let tail = (i + 1..m).map(|j| hessenberg[j][i] * y[j]).sum::<Rgb>();
+            y[i] = safe_div(g[i] - tail, hessenberg[i][i]);
+        }
+        start.iter().enumerate().map(|(i, b)| *b + (0..m).map(|k| y[k] * basis[k][i]).sum::<Rgb>() / scale[i]).collect()
+    }
+
     /// Reports and says whether to stop.
     fn done(&self, iteration: usize, residual: f64, radiosity: &[Rgb]) -> bool {
         (self.progress)(Progress::Solve { iteration, residual });
@@ -228,7 +245,6 @@ impl Run<'_> {
         let n = radiosity.len();
         let scale: Vec<f64> = system.area.iter().map(|a| a.sqrt()).collect();
         let dot = |a: &[Rgb], b: &[Rgb]| a.iter().zip(b).map(|(x, y)| *x * *y).sum::<Rgb>();
-        let safe_div = |x: Rgb, y: Rgb| Rgb::select(y.cmpeq(Rgb::ZERO), Rgb::ZERO, x / y);
         let norm = |a: &[Rgb]| dot(a, a).map(f64::sqrt);
         let target = self.settings.tolerance * self.emission_norm;
         let mut unscaled = vec![Rgb::ZERO; n];
@@ -281,21 +297,17 @@ impl Run<'_> {
                 hessenberg.push(column);
                 let estimate = g[k + 1].length();
                 (self.progress)(Progress::Solve { iteration, residual: estimate / self.emission_norm });
-                if estimate <= target || iteration >= self.settings.max_iterations {
+                let stop = estimate <= target || iteration >= self.settings.max_iterations;
+                if !stop {
+                    // The iterate so far, for progressive display: O(n k) beside the O(n^2) product.
+                    let current = self.iterate(radiosity, &hessenberg, &g, &basis, &scale);
+                    (self.progress)(Progress::Estimate { radiosity: &current });
+                } else {
                     break;
                 }
             }
-            // Back-substitute H y = g and update the iterate.
-            let m = hessenberg.len();
-            let mut y = vec![Rgb::ZERO; m];
-            for i in (0..m).rev() {
-                let tail = (i + 1..m).map(|j| hessenberg[j][i] * y[j]).sum::<Rgb>();
-                y[i] = safe_div(g[i] - tail, hessenberg[i][i]);
-            }
-            for (i, b) in radiosity.iter_mut().enumerate() {
-                let step: Rgb = (0..m).map(|k| y[k] * basis[k][i]).sum();
-                *b += step / scale[i];
-            }
+            let next = self.iterate(radiosity, &hessenberg, &g, &basis, &scale);
+            radiosity.copy_from_slice(&next);
         }
     }
 }
