@@ -82,6 +82,20 @@ impl Polygon {
         }
     }
 
+    /// A point distributed uniformly by area, from three uniform numbers in [0, 1).
+    pub fn uniform_point(&self, u: f64, v: f64, pick: f64) -> DVec3 {
+        let c = &self.corners;
+        let fold = |a: DVec3, b: DVec3, d: DVec3| {
+            let (s, t) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
+            a + (b - a) * s + (d - a) * t
+        };
+        if !self.is_quad() {
+            return fold(c[0], c[1], c[2]);
+        }
+        let first = triangle_area(c[0], c[1], c[2]);
+        if pick * self.area() < first { fold(c[0], c[1], c[2]) } else { fold(c[0], c[2], c[3]) }
+    }
+
     /// Quadrature over the polygon: calls `visit(point, weight)` with weights summing to 1.
     /// Level 0 is the centroid alone; level `m >= 1` splits a quad into `m x m` cells with 2 x 2
     /// Gauss-Legendre points each (exact for bicubics), and a triangle into `m^2` similar

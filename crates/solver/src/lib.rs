@@ -3,10 +3,12 @@
 //! The flow is [`scene`] (OBJ + MTL) -> [`mesh`] (patches) -> [`form_factors`] (with
 //! [`visibility`]) -> [`solve`]; [`pipeline`] runs it end to end with timings.
 
+pub mod accuracy;
 pub mod form_factors;
 pub mod geometry;
 pub mod mesh;
 pub mod pipeline;
+pub mod reference;
 pub mod scene;
 pub mod solve;
 pub mod visibility;
@@ -25,6 +27,13 @@ pub enum Progress<'a> {
         /// Rows finished.
         done: usize,
         /// Rows in all.
+        total: usize,
+    },
+    /// Reference probes finished out of total.
+    Probes {
+        /// Probes finished.
+        done: usize,
+        /// Probes in all.
         total: usize,
     },
     /// A solver iteration finished with this relative residual.

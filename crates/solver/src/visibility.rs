@@ -69,6 +69,26 @@ pub struct Occluders {
     index: Index,
     faces: Vec<OccluderFace>,
     centre: DVec3,
+    /// Rays start this far along, relative to nothing but the scene's size.
+    start_offset: f32,
+}
+
+/// The first face a ray meets.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Index of the face in the scene.
+    pub face: u32,
+    /// Distance along the (unit) direction.
+    pub distance: f64,
+    /// Whether the ray met the face's front (the side light leaves from).
+    pub front: bool,
+}
+
+/// `direction` in f32 with negative zeros made positive: obvhs's CWBVH picks the traversal
+/// octant from sign bits, and an exactly axis-aligned ray with a -0.0 component misses
+/// (measured: a ray straight down onto a floor found nothing).
+fn ray_direction(direction: DVec3) -> Vec3A {
+    Vec3A::from(direction.as_vec3()) + Vec3A::ZERO
 }
 
 /// Segments are shortened by this fraction of their length at each end, so that a point on a
@@ -107,15 +127,48 @@ impl Occluders {
             RayBackend::Bvh2 => Index::Bvh2(build_bvh2(&faces, params, &mut Duration::default())),
             RayBackend::Linear => Index::Linear,
         };
-        Occluders { index, faces, centre }
+        let diagonal = if scene.faces.is_empty() { 0.0 } else { (hi - lo).length() as f32 };
+        Occluders { index, faces, centre, start_offset: 1e-6 * diagonal }
+    }
+
+    /// The nearest face along the ray from `origin` in the unit `direction`, ignoring face
+    /// `ignore` (the one the ray starts on).
+    pub fn closest_hit(&self, origin: DVec3, direction: DVec3, ignore: u32) -> Option<Hit> {
+        let ray = Ray::new(Vec3A::from((origin - self.centre).as_vec3()), ray_direction(direction), self.start_offset, f32::INFINITY);
+        let hit = |ray: &Ray, face: u32| if face == ignore { f32::INFINITY } else { self.faces[face as usize].intersect(ray) };
+        let (mut best_face, mut best_t) = (u32::MAX, f32::INFINITY);
+        let mut consider = |face: u32, t: f32| {
+            if t < best_t {
+                (best_face, best_t) = (face, t);
+            }
+        };
+        match &self.index {
+            Index::CwBvh(bvh) => {
+                let mut record = obvhs::ray::RayHit::none();
+                if bvh.ray_traverse(ray, &mut record, |ray, id| hit(ray, bvh.primitive_indices[id])) {
+                    consider(bvh.primitive_indices[record.primitive_id as usize], record.t);
+                }
+            }
+            Index::Bvh2(bvh) => {
+                let mut record = obvhs::ray::RayHit::none();
+                if bvh.ray_traverse(ray, &mut record, |ray, id| hit(ray, bvh.primitive_indices[id])) {
+                    consider(bvh.primitive_indices[record.primitive_id as usize], record.t);
+                }
+            }
+            Index::Linear => (0..self.faces.len() as u32).for_each(|face| consider(face, hit(&ray, face))),
+        }
+        (best_face != u32::MAX).then(|| Hit {
+            face: best_face,
+            distance: best_t as f64,
+            front: self.faces[best_face as usize].normal.dot(ray.direction) < 0.0,
+        })
     }
 
     /// True when nothing but faces `ignore[0]` and `ignore[1]` (the endpoints' own faces, which a
     /// segment between two of their points cannot cross) lies between `from` and `to`.
     pub fn segment_is_clear(&self, from: DVec3, to: DVec3, ignore: [u32; 2]) -> bool {
         let origin = Vec3A::from((from - self.centre).as_vec3());
-        let direction = Vec3A::from((to - from).as_vec3());
-        let ray = Ray::new(origin, direction, SEGMENT_END_MARGIN, 1.0 - SEGMENT_END_MARGIN);
+        let ray = Ray::new(origin, ray_direction(to - from), SEGMENT_END_MARGIN, 1.0 - SEGMENT_END_MARGIN);
         let hit = |ray: &Ray, face: u32| {
             if face == ignore[0] || face == ignore[1] { f32::INFINITY } else { self.faces[face as usize].intersect(ray) }
         };
@@ -147,6 +200,12 @@ mod tests {
         assert!(occluders.segment_is_clear(dvec3(2.0, 0.0, -1.0), dvec3(2.0, 0.0, 1.0), [u32::MAX, u32::MAX]));
         // A segment that stops short of the wall is clear.
         assert!(occluders.segment_is_clear(a, dvec3(0.0, 0.0, -0.1), [u32::MAX, u32::MAX]));
+        // The wall faces +z: from below a ray meets its back, from above its front.
+        let up = occluders.closest_hit(a, DVec3::Z, u32::MAX).expect("hits the wall");
+        assert_eq!((up.face, up.front), (0, false));
+        assert!((up.distance - 1.0).abs() < 1e-6);
+        assert!(occluders.closest_hit(b, -DVec3::Z, u32::MAX).unwrap_or_else(|| panic!("{backend:?} misses")).front);
+        assert_eq!(occluders.closest_hit(a, DVec3::X, u32::MAX), None);
         }
     }
 }

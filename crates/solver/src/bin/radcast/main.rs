@@ -1,9 +1,14 @@
 //! `radcast`: offline radiosity solves and benchmarks from the command line.
 
+mod error_sweep;
+
 use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
 use solver::form_factors::MAX_RAYS_PER_PAIR;
-use solver::{FormFactorSettings, Method, PatchTarget, Progress, SolveReport, SolveRequest, SolverSettings, solve_file};
+use solver::accuracy::evaluate;
+use solver::reference::{Reference, place_probes, trace_probes};
+use solver::visibility::Occluders;
+use solver::{FormFactorSettings, Method, PatchTarget, Progress, Scene, SolveReport, SolveRequest, SolverSettings, solve_file};
 use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
@@ -27,11 +32,44 @@ enum Command {
         /// Print one JSON object on stdout instead of the table.
         #[arg(long)]
         json: bool,
+        /// Also measure the error against this reference file (adds `error` to the JSON).
+        #[arg(long)]
+        reference: Option<PathBuf>,
     },
-    /// Time every stage at several patch counts and print a Markdown table of medians.
-    Bench {
+    /// Estimate the continuous radiosity at probe points by path tracing: a reference that
+    /// depends on no mesh.
+    Reference {
         /// The OBJ file.
         scene: PathBuf,
+        /// Probe points, spread over the surfaces by area.
+        #[arg(long, default_value_t = 1000)]
+        probes: usize,
+        /// Paths per probe.
+        #[arg(long, default_value_t = 16384)]
+        samples: u32,
+        /// Seed of the random streams.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Where to write the JSON.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Time every stage at several patch counts and print a Markdown table of medians; with
+    /// --error, sweep configurations against each scene's reference and write
+    /// docs/speed-vs-error.md and .svg.
+    Bench {
+        /// The OBJ files (several with --error).
+        #[arg(required = true)]
+        scenes: Vec<PathBuf>,
+        /// Measure speed against error (needs scenes/reference/<name>.json).
+        #[arg(long)]
+        error: bool,
+        /// Shadow rays per far pair to sweep with --error, comma-separated.
+        #[arg(long, value_delimiter = ',', default_value = "1,2,4")]
+        sweep_rays: Vec<u32>,
+        /// Folder for the --error table and plot.
+        #[arg(long, default_value = "docs")]
+        out_dir: PathBuf,
         /// Patch counts to run, comma-separated.
         #[arg(long, value_delimiter = ',', default_value = "150,600,2500,10000")]
         counts: Vec<usize>,
@@ -124,6 +162,7 @@ impl ProgressPrinter {
         match progress {
             Progress::FormFactors { done, total } => eprintln!("[{t:6.1}s] form factors {:5.1}%", 100.0 * done as f64 / total as f64),
             Progress::Solve { iteration, residual } => eprintln!("[{t:6.1}s] solve: iteration {iteration}, residual {residual:.3e}"),
+            Progress::Probes { done, total } => eprintln!("[{t:6.1}s] reference: {done} of {total} probes"),
             Progress::Estimate { .. } => {}
         }
     }
@@ -131,10 +170,17 @@ impl ProgressPrinter {
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
-        Command::Solve { scene, settings, json } => {
+        Command::Solve { scene, settings, json, reference } => {
             let request = settings.request()?;
             let printer = ProgressPrinter::new();
+            let reference = reference
+                .map(|path| -> anyhow::Result<Reference> {
+                    let text = std::fs::read_to_string(&path).with_context(|| format!("{}: cannot read", path.display()))?;
+                    serde_json::from_str(&text).with_context(|| format!("{}: not a radcast reference", path.display()))
+                })
+                .transpose()?;
             let solved = solve_file(&scene, &request, &|p| printer.report(p))?;
+            let error = reference.map(|r| evaluate(&solved.scene, &solved.mesh, &solved.radiosity, &r.probes));
             let report = &solved.report;
             if report.skipped_faces > 0 {
                 eprintln!("warning: {}: skipped {} zero-area faces", scene.display(), report.skipped_faces);
@@ -146,12 +192,47 @@ fn main() -> anyhow::Result<()> {
                 );
             }
             if json {
-                println!("{}", serde_json::to_string(report).context("serialising the report")?);
+                let mut value = serde_json::to_value(report).context("serialising the report")?;
+                if let Some(error) = error {
+                    value["error"] = serde_json::to_value(error)?;
+                }
+                println!("{value}");
             } else {
                 print_summary(&scene, report);
+                if let Some(e) = error {
+                    println!(
+                        "error       smooth RMS {:.4}, max {:.3}, energy {:+.4}; flat RMS {:.4}  ({} probes, reference noise {:.4})",
+                        e.smooth.rms, e.smooth.max, e.smooth.energy, e.flat.rms, e.probes, e.reference_noise
+                    );
+                }
             }
         }
-        Command::Bench { scene, counts, repeat, settings } => bench(&scene, &counts, repeat.max(1), &settings)?,
+        Command::Reference { scene: path, probes, samples, seed, out } => {
+            anyhow::ensure!(probes > 0 && samples > 1, "--probes must be at least 1 and --samples at least 2");
+            let scene = Scene::load_obj(&path)?;
+            let occluders = Occluders::new(&scene);
+            let printer = ProgressPrinter::new();
+            let placed = place_probes(&scene, probes, seed);
+            let traced = trace_probes(&scene, &occluders, &placed, samples, seed, &|p| printer.report(p));
+            let command = format!("radcast reference {} --probes {probes} --samples {samples} --seed {seed} --out {}", path.display(), out.display());
+            let reference = Reference { command, seed, samples, probes: traced };
+            std::fs::write(&out, serde_json::to_string_pretty(&reference)?).with_context(|| format!("{}: cannot write", out.display()))?;
+            eprintln!("wrote {} ({} probes x {samples} paths)", out.display(), probes);
+        }
+        Command::Bench { scenes, error: true, counts, repeat, sweep_rays, out_dir, .. } => {
+            let command = format!(
+                "radcast bench --error {} --counts {} --sweep-rays {} --repeat {repeat}",
+                scenes.iter().map(|s| s.display().to_string()).collect::<Vec<_>>().join(" "),
+                counts.iter().map(ToString::to_string).collect::<Vec<_>>().join(","),
+                sweep_rays.iter().map(ToString::to_string).collect::<Vec<_>>().join(",")
+            );
+            error_sweep::run(&scenes, &counts, &sweep_rays, repeat.max(1), &out_dir, &command)?;
+        }
+        Command::Bench { scenes, counts, repeat, settings, .. } => {
+            for scene in &scenes {
+                bench(scene, &counts, repeat.max(1), &settings)?;
+            }
+        }
     }
     Ok(())
 }

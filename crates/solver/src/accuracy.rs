@@ -1,0 +1,140 @@
+//! Error of a solution at probe points, against a reference or an exact answer.
+//!
+//! Two readings of a solution are measured: **flat** (the value of the patch holding the probe)
+//! and **smooth** (what viewers show: corner values as area-weighted means of the patches around
+//! each corner, interpolated over the patch's fan triangles, as `wire::display` does).
+//! Only probes on non-emitting faces count: an emitter's own emission is exact and would
+//! swamp the comparison.
+
+use crate::mesh::Mesh;
+use crate::reference::Probe;
+use crate::scene::{Rgb, Scene};
+use glam::DVec3;
+use serde::Serialize;
+use std::ops::Range;
+
+/// Errors of one reading, all relative.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ErrorStats {
+    /// `sqrt(sum |B - B_ref|^2) / sqrt(sum |B_ref|^2)` over probes and channels.
+    pub rms: f64,
+    /// The largest probe error `|B - B_ref|`, relative to the reference's RMS probe value.
+    pub max: f64,
+    /// `sum B / sum B_ref - 1`: probes are spread by area, so this is the energy balance.
+    pub energy: f64,
+}
+
+/// A solution's error at the probes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct SolutionError {
+    /// Probes that counted (on non-emitting faces).
+    pub probes: usize,
+    /// Patch values.
+    pub flat: ErrorStats,
+    /// Interpolated values, as viewers show them.
+    pub smooth: ErrorStats,
+    /// The reference's own relative RMS standard error: the floor under `rms`.
+    pub reference_noise: f64,
+}
+
+/// Where a probe falls: its patch and the smooth value there.
+struct Located {
+    patch: usize,
+    smooth: Rgb,
+}
+
+/// Radiosity at every mesh corner: the area-weighted mean of the patches that share it.
+pub fn corner_radiosity(mesh: &Mesh, radiosity: &[Rgb]) -> Vec<Rgb> {
+    let mut sums = vec![(Rgb::ZERO, 0.0); mesh.positions.len()];
+    for (patch, b) in mesh.patches.iter().zip(radiosity) {
+        for &c in &patch.corners[..patch.corner_count()] {
+            sums[c as usize].0 += *b * patch.area;
+            sums[c as usize].1 += patch.area;
+        }
+    }
+    sums.into_iter().map(|(sum, area)| if area > 0.0 { sum / area } else { Rgb::ZERO }).collect()
+}
+
+/// Barycentric coordinates of `p` (in the plane) in triangle `a, b, c`.
+fn barycentric(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
+    let (v0, v1, v2) = (b - a, c - a, p - a);
+    let (d00, d01, d11, d20, d21) = (v0.dot(v0), v0.dot(v1), v1.dot(v1), v2.dot(v0), v2.dot(v1));
+    let denominator = d00 * d11 - d01 * d01;
+    if denominator == 0.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    let v = (d11 * d20 - d01 * d21) / denominator;
+    let w = (d00 * d21 - d01 * d20) / denominator;
+    [1.0 - v - w, v, w]
+}
+
+fn locate(mesh: &Mesh, corners: &[Rgb], faces: &[Range<usize>], probe: &Probe) -> Located {
+    let p = DVec3::from(probe.position);
+    // The fan triangle that holds p best: the largest smallest barycentric (inside when >= 0).
+    let mut best = (f64::NEG_INFINITY, 0, Rgb::ZERO);
+    for index in faces[probe.face as usize].clone() {
+        let patch = &mesh.patches[index];
+        let ids = &patch.corners[..patch.corner_count()];
+        for k in 1..ids.len() - 1 {
+            let tri = [ids[0], ids[k], ids[k + 1]];
+            let weights = barycentric(p, mesh.positions[tri[0] as usize], mesh.positions[tri[1] as usize], mesh.positions[tri[2] as usize]);
+            let inside = weights.iter().cloned().fold(f64::INFINITY, f64::min);
+            if inside > best.0 {
+                let smooth = (0..3).map(|i| corners[tri[i] as usize] * weights[i]).sum();
+                best = (inside, index, smooth);
+            }
+        }
+    }
+    Located { patch: best.1, smooth: best.2 }
+}
+
+/// Patches of each face, as index ranges ([`Mesh::build`] meshes face by face).
+fn face_ranges(mesh: &Mesh, face_count: usize) -> Vec<Range<usize>> {
+    // `end == 0` marks a face not seen yet: a real range ends at 1 or later.
+    let mut ranges = vec![0..0; face_count];
+    for (i, patch) in mesh.patches.iter().enumerate() {
+        let range = &mut ranges[patch.face as usize];
+        if range.end == 0 {
+            *range = i..i + 1;
+        } else {
+            range.end = i + 1;
+        }
+    }
+    ranges
+}
+
+fn stats(pairs: &[(Rgb, Rgb)]) -> ErrorStats {
+    let reference_sq: f64 = pairs.iter().map(|(_, r)| r.length_squared()).sum();
+    let error_sq: f64 = pairs.iter().map(|(e, r)| (*e - *r).length_squared()).sum();
+    let reference_rms = (reference_sq / pairs.len().max(1) as f64).sqrt();
+    let largest = pairs.iter().map(|(e, r)| (*e - *r).length()).fold(0.0, f64::max);
+    let (estimated_sum, reference_sum) = pairs.iter().fold((0.0, 0.0), |(a, b), (e, r)| (a + e.element_sum(), b + r.element_sum()));
+    let ratio = |x: f64, y: f64| if y > 0.0 { x / y } else { 0.0 };
+    ErrorStats {
+        rms: ratio(error_sq.sqrt(), reference_sq.sqrt()),
+        max: ratio(largest, reference_rms),
+        energy: if reference_sum > 0.0 { estimated_sum / reference_sum - 1.0 } else { 0.0 },
+    }
+}
+
+/// Measures `radiosity` on `mesh` (built from `scene`) at the probes.
+pub fn evaluate(scene: &Scene, mesh: &Mesh, radiosity: &[Rgb], probes: &[Probe]) -> SolutionError {
+    let corners = corner_radiosity(mesh, radiosity);
+    let faces = face_ranges(mesh, scene.faces.len());
+    let counted: Vec<&Probe> = probes.iter().filter(|p| scene.faces.get(p.face as usize).is_some_and(|f| f.emission == Rgb::ZERO)).collect();
+    let (mut flat, mut smooth) = (Vec::new(), Vec::new());
+    for probe in &counted {
+        let reference = Rgb::from(probe.radiosity);
+        let located = locate(mesh, &corners, &faces, probe);
+        flat.push((radiosity[located.patch], reference));
+        smooth.push((located.smooth, reference));
+    }
+    let noise_sq: f64 = counted.iter().map(|p| Rgb::from(p.standard_error).length_squared()).sum();
+    let reference_sq: f64 = counted.iter().map(|p| Rgb::from(p.radiosity).length_squared()).sum();
+    SolutionError {
+        probes: counted.len(),
+        flat: stats(&flat),
+        smooth: stats(&smooth),
+        reference_noise: if reference_sq > 0.0 { (noise_sq / reference_sq).sqrt() } else { 0.0 },
+    }
+}
