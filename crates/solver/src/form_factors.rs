@@ -72,6 +72,26 @@ fn near_pair_level(p: &Patch, q: &Patch) -> Option<u32> {
     Some(level)
 }
 
+/// Rays a receiver casts over its hemisphere to decide whether its view is closed.
+const CLOSURE_RAYS: u32 = 64;
+
+/// Whether every one of [`CLOSURE_RAYS`] cosine-distributed rays from stratified points of the
+/// patch meets the front of some face: then all the light leaving it lands on a patch, and its
+/// row must sum to one however coarsely visibility was sampled. Rays that escape or meet a back
+/// face mean the view is open, and the row is left as computed.
+fn sees_closed_view(p: &Patch, index: usize, occluders: &Occluders) -> bool {
+    let (tangent, bitangent) = p.normal.any_orthonormal_pair();
+    let seed = splitmix64(index as u64 ^ 0xC105_ED00);
+    (0..CLOSURE_RAYS).all(|k| {
+        let (u, v) = stratified_uv(k, seed);
+        let (s, t) = stratified_uv(k, splitmix64(seed));
+        // Malley's method: uniform points on the disc, lifted to the hemisphere (pbrt 4e, 13.6).
+        let (radius, angle) = (s.sqrt(), std::f64::consts::TAU * t);
+        let direction = tangent * (radius * angle.cos()) + bitangent * (radius * angle.sin()) + p.normal * (1.0 - s).sqrt();
+        occluders.closest_hit(p.polygon.point_at(u, v), direction.normalize(), p.face).is_some_and(|hit| hit.front)
+    })
+}
+
 /// Shadow rays between two patches: more for pairs that are near against their size, where
 /// visibility varies most across the pair. Symmetric in the pair.
 fn rays_for_pair(p: &Patch, q: &Patch, settings: &FormFactorSettings) -> u32 {
@@ -194,43 +214,28 @@ impl DenseFormFactors {
         mirror_upper_triangle(&mut clear, n);
 
         // Pass 2: row i integrates its receiver's view: far sources at the centroid, near ones
-        // with their own finer rule. The centroid's view of all sources together is exact, so
-        // the far sources are rescaled to keep that total: a closed, unoccluded enclosure sums
-        // to one on every row, which bright scenes need.
+        // with their own finer rule. A receiver whose view is closed (all its hemisphere rays
+        // meet a front face) sends all its light to patches, so its row is normalised to one:
+        // closed enclosures stay exact for bright surfaces (rho -> 1) and with occluders,
+        // whatever the sampling noise of visibility.
         let mut values = vec![0f32; n * n];
         values.par_chunks_mut(n.max(1)).enumerate().for_each(|(i, row)| {
             let p = &patches[i];
             let clear_row = &clear[i * n..(i + 1) * n];
-            let mut near = Vec::new();
-            let (mut far_centroid, mut near_centroid, mut near_fine) = (0.0, 0.0, 0.0);
+            let mut sum = 0.0;
             for (j, value) in row.iter_mut().enumerate() {
-                if clear_row[j] == NOT_FACING || i == j {
+                if clear_row[j] == NOT_FACING || clear_row[j] == 0 || i == j {
                     continue;
                 }
                 let q = &patches[j];
-                let centroid = unoccluded_form_factor(p, q, 0);
-                match near_pair_level(p, q) {
-                    Some(level) => {
-                        let fine = unoccluded_form_factor(p, q, level);
-                        (near_centroid, near_fine) = (near_centroid + centroid, near_fine + fine);
-                        near.push(j);
-                        *value = fine as f32;
-                    }
-                    None => {
-                        far_centroid += centroid;
-                        *value = centroid as f32;
-                    }
-                }
+                let level = near_pair_level(p, q).unwrap_or(0);
+                let visible = clear_row[j] as f64 / rays_for_pair(p, q, settings) as f64;
+                let factor = unoccluded_form_factor(p, q, level) * visible;
+                *value = factor as f32;
+                sum += factor;
             }
-            let far_scale = if far_centroid > 0.0 { ((far_centroid + near_centroid - near_fine) / far_centroid).max(0.0) } else { 1.0 };
-            let mut near = near.into_iter().peekable();
-            for (j, value) in row.iter_mut().enumerate() {
-                if *value == 0.0 {
-                    continue;
-                }
-                let scale = if near.next_if_eq(&j).is_some() { 1.0 } else { far_scale };
-                let visible = clear_row[j] as f64 / rays_for_pair(p, &patches[j], settings) as f64;
-                *value = (*value as f64 * scale * visible) as f32;
+            if sum > 0.0 && sees_closed_view(p, i, occluders) {
+                row.iter_mut().for_each(|value| *value = (*value as f64 / sum) as f32);
             }
             report();
         });
