@@ -131,7 +131,7 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
     let bounds = |f: fn(&Row) -> f64| rows.iter().map(f).fold((f64::INFINITY, 0.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
     let (t_lo, t_hi) = bounds(|r| r.seconds[3]);
     let (e_lo, e_hi) = bounds(|r| r.error.smooth.rms.max(1e-6));
-    let root = SVGBackend::new(path, (900, 600)).into_drawing_area();
+    let root = SVGBackend::new(path, (960, 640)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
         .caption("radcast: total seconds vs smooth RMS error (log-log)", ("sans-serif", 22))
@@ -139,27 +139,42 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
         .x_label_area_size(45)
         .y_label_area_size(70)
         .build_cartesian_2d((t_lo * 0.7..t_hi * 1.4).log_scale(), (e_lo * 0.7..e_hi * 1.4).log_scale())?;
-    chart.configure_mesh().x_desc("total seconds").y_desc("smooth RMS error").draw()?;
+    chart
+        .configure_mesh()
+        .x_desc("total seconds (load + mesh + form factors + solve)")
+        .y_desc("smooth RMS error vs reference")
+        .x_label_formatter(&|x| format!("{x:.3}"))
+        .y_label_formatter(&|y| format!("{y:.3}"))
+        .draw()?;
     let colours = [RED, BLUE, GREEN, MAGENTA, CYAN, BLACK];
-    let groups: Vec<(String, u32)> = {
-        let mut g: Vec<_> = rows.iter().map(|r| (r.method.to_string(), r.rays)).collect();
-        g.dedup();
-        g.sort();
-        g.dedup();
-        g
-    };
+    let mut groups: Vec<(String, u32)> = rows.iter().map(|r| (r.method.to_string(), r.rays)).collect();
+    groups.sort();
+    groups.dedup();
+    let mut scenes: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
+    scenes.dedup();
+    let point = |r: &Row| (r.seconds[3], r.error.smooth.rms.max(1e-6));
     for (k, (method, rays)) in groups.iter().enumerate() {
         let colour = colours[k % colours.len()];
-        let points: Vec<(f64, f64)> = rows.iter().filter(|r| r.method.to_string() == *method && r.rays == *rays).map(|r| (r.seconds[3], r.error.smooth.rms.max(1e-6))).collect();
-        chart
-            .draw_series(points.iter().map(|p| Circle::new(*p, 5, colour.filled())))?
-            .label(format!("{method}, {rays} rays/pair"))
-            .legend(move |(x, y)| Circle::new((x, y), 5, colour.filled()));
+        let in_group = |r: &&Row| r.method.to_string() == *method && r.rays == *rays;
+        // Circles for the first scene, triangles for the second, squares after.
+        for (s, scene) in scenes.iter().enumerate() {
+            let points: Vec<(f64, f64)> = rows.iter().filter(in_group).filter(|r| r.scene == *scene).map(point).collect();
+            let style = colour.filled();
+            match s {
+                0 => chart.draw_series(points.iter().map(|p| Circle::new(*p, 5, style)))?,
+                1 => chart.draw_series(points.iter().map(|p| TriangleMarker::new(*p, 6, style)))?,
+                _ => chart.draw_series(points.iter().map(|p| Rectangle::new([*p, *p], style)))?,
+            };
+        }
+        chart.draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?.label(format!("{method}, {rays} rays/pair")).legend(move |(x, y)| Circle::new((x, y), 5, colour.filled()));
     }
-    let mut front: Vec<(f64, f64)> = rows.iter().filter(|r| r.pareto).map(|r| (r.seconds[3], r.error.smooth.rms.max(1e-6))).collect();
-    front.sort_by(|a, b| a.0.total_cmp(&b.0));
-    chart.draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?.label("Pareto front").legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], BLACK));
-    chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+    for (s, scene) in scenes.iter().enumerate() {
+        let mut front: Vec<(f64, f64)> = rows.iter().filter(|r| r.pareto && r.scene == *scene).map(point).collect();
+        front.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let marker = if s == 0 { "circles" } else if s == 1 { "triangles" } else { "squares" };
+        chart.draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?.label(format!("Pareto front, {scene} ({marker})")).legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], BLACK));
+    }
+    chart.configure_series_labels().position(SeriesLabelPosition::LowerLeft).background_style(WHITE.mix(0.9)).border_style(BLACK).draw()?;
     root.present()?;
     Ok(())
 }
