@@ -12,6 +12,9 @@ use std::time::Duration;
 use tokio_tungstenite::tungstenite::Message;
 use wire::{ClientMessage, Geometry, PatchBuffer, ServerMessage};
 
+/// The control token of test servers.
+const TOKEN: &str = "test-token";
+
 /// Generous bound on waits that normally take milliseconds; a hang fails instead of blocking CI.
 const PATIENCE: Duration = Duration::from_secs(60);
 
@@ -27,7 +30,7 @@ async fn serve(shared: Arc<Shared>) -> SocketAddr {
 async fn cornell_server(limits: Limits) -> (SocketAddr, Arc<Shared>) {
     let request = SolveRequest { patches: PatchTarget::Count(400), ..SolveRequest::default() };
     let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).expect("scene loads");
-    let shared = shared_for(&prepared, limits);
+    let shared = shared_for(&prepared, limits, TOKEN.into());
     let address = serve(shared.clone()).await;
     let solving = shared.clone();
     tokio::task::spawn_blocking(move || solve_and_publish(&prepared, &solving, None).expect("solves"));
@@ -44,7 +47,15 @@ async fn synthetic_server(patches: u32, limits: Limits) -> (SocketAddr, Arc<Shar
         camera: None,
     };
     let hub = Hub::new(7, &geometry, &vec![[0.0; 3]; patches as usize]);
-    let shared = Arc::new(Shared { hub: Arc::new(hub), metrics: Default::default(), limits, shutdown: Default::default(), report: Default::default() });
+    let shared = Arc::new(Shared {
+        hub: Arc::new(hub),
+        metrics: Default::default(),
+        limits,
+        shutdown: Default::default(),
+        report: Default::default(),
+        edits: Default::default(),
+        token: TOKEN.into(),
+    });
     (serve(shared.clone()).await, shared)
 }
 
@@ -270,7 +281,7 @@ async fn a_restart_serves_the_cached_solution_and_ignores_a_corrupt_cache() {
     let solve_once = |cache: std::path::PathBuf| {
         tokio::task::spawn_blocking(move || {
             let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).unwrap();
-            let shared = shared_for(&prepared, Limits::default());
+            let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
             solve_and_publish(&prepared, &shared, Some(&cache)).unwrap();
             routes::solution_summary(&shared)
         })

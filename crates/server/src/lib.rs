@@ -2,6 +2,7 @@
 //! background solve that feeds it. `main.rs` only parses flags and binds a socket, so tests run
 //! the same server on an ephemeral port.
 
+pub mod edits;
 pub mod hub;
 pub mod metrics;
 pub mod routes;
@@ -51,4 +52,8 @@ pub struct Shared {
     pub shutdown: CancellationToken,
     /// The solve summary once it is done (JSON), for `/api/solution`.
     pub report: std::sync::Mutex<Option<serde_json::Value>>,
+    /// Edits waiting for the solver thread.
+    pub edits: edits::Edits,
+    /// The bearer token the control API requires.
+    pub token: String,
 }

@@ -2,7 +2,7 @@
 
 use anyhow::Context;
 use clap::Parser;
-use server::solving::{prepare, shared_for, solve_and_publish};
+use server::solving::{emitters, prepare, serve_edits, shared_for, solve_and_publish};
 use server::{Limits, routes};
 use solver::{FormFactorSettings, Method, PatchTarget, SolveRequest, SolverSettings};
 use std::path::PathBuf;
@@ -42,6 +42,19 @@ struct Args {
     /// Seconds without any message (pongs included) before a viewer is dropped.
     #[arg(long, default_value_t = Limits::default().idle_timeout.as_secs_f64())]
     idle_timeout: f64,
+    /// Bearer token for the control API; a random one is made and printed when absent.
+    #[arg(long, env = "RADCAST_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// Demo: the scene's lights flicker (emission changes once a second), so viewers see live updates.
+    #[arg(long)]
+    animate: bool,
+}
+
+/// 128 random bits as hex, from the operating system.
+fn random_token() -> anyhow::Result<String> {
+    let mut bytes = [0u8; 16];
+    getrandom::fill(&mut bytes).map_err(|e| anyhow::anyhow!("no randomness for the control token: {e}"))?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
 }
 
 fn seconds(value: f64, flag: &str) -> anyhow::Result<Duration> {
@@ -67,20 +80,29 @@ async fn main() -> anyhow::Result<()> {
         ..Limits::default()
     };
     let prepared = prepare(&args.scene, request)?;
-    let shared = shared_for(&prepared, limits);
+    let token = match args.token {
+        Some(token) if !token.is_empty() => token,
+        Some(_) => anyhow::bail!("--token must not be empty"),
+        None => random_token()?,
+    };
+    let shared = shared_for(&prepared, limits, token.clone());
     let listener = tokio::net::TcpListener::bind(&args.addr).await.with_context(|| format!("cannot listen on {}", args.addr))?;
     let address = listener.local_addr()?;
     println!(
-        "radcast-server: {} ({} patches) on http://{address}\n  viewers: radcast-client view --url ws://{address}/ws --out view.png",
+        "radcast-server: {} ({} patches) on http://{address}\n  viewers: radcast-client view --url ws://{address}/ws --out view.png\n  control: curl -X PUT -H 'Authorization: Bearer {token}' -d '{{\"emission\": [17, 12, 4]}}' http://{address}/api/objects/NAME/emission",
         args.scene.display(),
         prepared.mesh.patches.len()
     );
+    if args.animate {
+        tokio::spawn(animate(shared.clone(), emitters(&prepared)));
+    }
 
     let cache_dir = (!args.no_cache).then_some(args.cache_dir);
     let solving = {
         let shared = shared.clone();
         tokio::task::spawn_blocking(move || {
-            if let Err(error) = solve_and_publish(&prepared, &shared, cache_dir.as_deref()) {
+            let served = solve_and_publish(&prepared, &shared, cache_dir.as_deref()).and_then(|solution| serve_edits(&prepared, &shared, solution));
+            if let Err(error) = served {
                 tracing::error!("solve failed: {error:#}");
             }
         })
@@ -92,7 +114,24 @@ async fn main() -> anyhow::Result<()> {
         shutdown.cancel();
     });
     let stopped = shared.shutdown.clone();
+    let edits_done = shared.clone();
     axum::serve(listener, routes::router(shared)).with_graceful_shutdown(async move { stopped.cancelled().await }).await?;
+    edits_done.edits.close();
     solving.abort();
     Ok(())
+}
+
+/// Flickers every emitter between 40% and 100% of its emission, one change a second.
+async fn animate(shared: std::sync::Arc<server::Shared>, emitters: Vec<(String, [f64; 3])>) {
+    let mut tick = tokio::time::interval(Duration::from_secs(1));
+    for step in 0u64.. {
+        tokio::select! {
+            _ = tick.tick() => {}
+            _ = shared.shutdown.cancelled() => return,
+        }
+        let level = 0.7 + 0.3 * (step as f64 * 0.9).sin();
+        for (name, emission) in &emitters {
+            shared.edits.set_emission(name, emission.map(|c| c * level));
+        }
+    }
 }

@@ -7,11 +7,14 @@ use axum::extract::State;
 use axum::extract::ws::WebSocketUpgrade;
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use axum::routing::get;
+use axum::extract::Path;
+use axum::http::HeaderMap;
+use axum::routing::{get, put};
 use serde::Serialize;
 use std::sync::Arc;
 
-/// The router: `/healthz`, `/api/scene`, `/api/scene.glb`, `/api/solution`, `/ws`, `/metrics`.
+/// The router: `/healthz`, `/api/scene`, `/api/scene.glb`, `/api/solution`, `/ws`, `/metrics`,
+/// and the control API `PUT /api/objects/{name}/emission` (bearer token).
 pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/healthz", get(|| async { "ok\n" }))
@@ -20,6 +23,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/solution", get(solution))
         .route("/ws", get(websocket))
         .route("/metrics", get(metrics))
+        .route("/api/objects/{name}/emission", put(set_emission))
         .with_state(shared)
 }
 
@@ -94,4 +98,51 @@ async fn websocket(State(shared): State<Arc<Shared>>, upgrade: WebSocketUpgrade)
         .max_message_size(limits.max_message_bytes)
         .max_frame_size(limits.max_message_bytes)
         .on_upgrade(move |socket| serve_viewer(socket, slot))
+}
+
+/// Whether `headers` carry `Authorization: Bearer <token>`, compared in constant time.
+pub fn authorized(headers: &HeaderMap, token: &str) -> bool {
+    let Some(given) = headers.get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()).and_then(|v| v.strip_prefix("Bearer ")) else {
+        return false;
+    };
+    given.len() == token.len() && given.bytes().zip(token.bytes()).fold(0u8, |acc, (a, b)| acc | (a ^ b)) == 0
+}
+
+fn refuse(status: StatusCode, reason: String) -> Response {
+    let mut response = (status, axum::Json(serde_json::json!({ "error": reason }))).into_response();
+    if status == StatusCode::UNAUTHORIZED {
+        response.headers_mut().insert(header::WWW_AUTHENTICATE, header::HeaderValue::from_static("Bearer"));
+    }
+    response
+}
+
+/// Checks an emission edit: the object exists and the body is `{"emission": [r, g, b]}` with
+/// finite, non-negative channels. Returns the emission or the reason.
+pub fn parse_emission_edit(objects: &[String], name: &str, body: &[u8]) -> Result<[f64; 3], (StatusCode, String)> {
+    if !objects.iter().any(|o| o == name) {
+        return Err((StatusCode::NOT_FOUND, format!("no object named '{name}'")));
+    }
+    #[derive(serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Body {
+        emission: [f64; 3],
+    }
+    let body: Body = serde_json::from_slice(body).map_err(|e| (StatusCode::BAD_REQUEST, format!("body must be JSON like {{\"emission\": [r, g, b]}}: {e}")))?;
+    if !body.emission.iter().all(|c| c.is_finite() && *c >= 0.0) {
+        return Err((StatusCode::BAD_REQUEST, format!("emission {:?} must have every channel finite and >= 0", body.emission)));
+    }
+    Ok(body.emission)
+}
+
+async fn set_emission(State(shared): State<Arc<Shared>>, Path(name): Path<String>, headers: HeaderMap, body: axum::body::Bytes) -> Response {
+    if !authorized(&headers, &shared.token) {
+        return refuse(StatusCode::UNAUTHORIZED, "missing or wrong bearer token".into());
+    }
+    match parse_emission_edit(&shared.hub.geometry_model.objects, &name, &body) {
+        Ok(emission) => {
+            shared.edits.set_emission(&name, emission);
+            (StatusCode::ACCEPTED, axum::Json(serde_json::json!({ "object": name, "emission": emission, "status": "queued" }))).into_response()
+        }
+        Err((status, reason)) => refuse(status, reason),
+    }
 }

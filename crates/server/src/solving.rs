@@ -6,7 +6,7 @@ use anyhow::Context;
 use bincode::{Decode, Encode};
 use glam::DVec3;
 use sha2::{Digest, Sha256};
-use solver::{Mesh, Progress, Rgb, Scene, SolveRequest};
+use solver::{Mesh, Progress, Rgb, Scene, Session, SolveRequest};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -110,16 +110,25 @@ fn write_cache(dir: &Path, path: &Path, cached: &CachedSolution) -> anyhow::Resu
     Ok(())
 }
 
+/// What the first solve leaves for later edits: the live session, or (after a cache hit) the
+/// cached radiosity to warm-start one from when the first edit arrives.
+pub enum Solution {
+    /// Form factors in memory.
+    Live(Box<Session>),
+    /// Read from the cache; form factors not computed yet.
+    Cached(Vec<[f32; 3]>),
+}
+
 /// Solves (or reads the cache), publishing progressive frames and then the final one.
 /// Blocking: run it on a blocking thread.
-pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option<&Path>) -> anyhow::Result<()> {
+pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option<&Path>) -> anyhow::Result<Solution> {
     let hub = &shared.hub;
     let cache = cache_dir.map(|dir| (dir, cache_path(dir, prepared.scene_id)));
     if let Some(cached) = cache.as_ref().and_then(|(_, path)| read_cache(path, prepared.mesh.patches.len())) {
         tracing::info!("solution read from the cache");
         hub.publish(&cached.radiosity, true);
         *shared.report.lock().expect("report lock") = serde_json::from_str(&cached.report_json).ok();
-        return Ok(());
+        return Ok(Solution::Cached(cached.radiosity));
     }
     let last_snapshot = Mutex::new(Instant::now());
     let progress = |p: Progress| {
@@ -131,8 +140,9 @@ pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option
             hub.publish(&to_f32(radiosity), false);
         }
     };
-    let (radiosity, report) = solver::solve_mesh(&prepared.scene, &prepared.mesh, &prepared.request, &progress)?;
-    let radiosity = to_f32(&radiosity);
+    let mut session = Session::new(&prepared.scene, &prepared.mesh, &prepared.request, &progress)?;
+    let report = session.solve(&progress);
+    let radiosity = to_f32(&session.radiosity);
     hub.publish(&radiosity, true);
     let s = report.seconds;
     *shared.metrics.solve_seconds.lock().expect("metrics lock") = vec![("mesh", s.mesh), ("form_factors", s.form_factors), ("solve", s.solve), ("total", s.total)];
@@ -142,16 +152,66 @@ pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option
     if let Some((dir, path)) = cache {
         write_cache(dir, &path, &CachedSolution { radiosity, report_json })?;
     }
+    Ok(Solution::Live(Box::new(session)))
+}
+
+/// Applies edits as they come until shutdown: each batch re-solves from the current answer
+/// (form factors unchanged) and publishes one new version. Blocking.
+pub fn serve_edits(prepared: &Prepared, shared: &Shared, solution: Solution) -> anyhow::Result<()> {
+    let mut session = match solution {
+        Solution::Live(session) => *session,
+        Solution::Cached(radiosity) => {
+            // Form factors are computed on the first edit only: a cached scene nobody edits
+            // never pays for them.
+            let Some(batch) = shared.edits.wait() else { return Ok(()) };
+            let mut session = Session::new(&prepared.scene, &prepared.mesh, &prepared.request, &solver::no_progress)?;
+            session.radiosity = radiosity.iter().map(|c| Rgb::new(c[0] as f64, c[1] as f64, c[2] as f64)).collect();
+            apply(&mut session, shared, batch);
+            session
+        }
+    };
+    while let Some(batch) = shared.edits.wait() {
+        apply(&mut session, shared, batch);
+    }
     Ok(())
 }
 
+fn apply(session: &mut Session, shared: &Shared, batch: std::collections::BTreeMap<String, [f64; 3]>) {
+    let started = Instant::now();
+    for (object, emission) in &batch {
+        if let Err(error) = session.set_emission(object, Rgb::from(*emission)) {
+            tracing::warn!("edit refused: {error}");
+        }
+    }
+    let report = session.solve(&solver::no_progress);
+    let version = shared.hub.publish(&to_f32(&session.radiosity), report.converged);
+    tracing::info!(version, edits = batch.len(), iterations = report.iterations, ms = started.elapsed().as_secs_f64() * 1e3, "re-solved");
+    if let Ok(json) = serde_json::to_value(&report) {
+        *shared.report.lock().expect("report lock") = Some(json);
+    }
+}
+
 /// Everything a server needs for one scene: the shared state, ready for [`crate::routes::router`].
-pub fn shared_for(prepared: &Prepared, limits: crate::Limits) -> Arc<Shared> {
+pub fn shared_for(prepared: &Prepared, limits: crate::Limits, token: String) -> Arc<Shared> {
     Arc::new(Shared {
         hub: Arc::new(hub_for(prepared)),
         metrics: Default::default(),
         limits,
         shutdown: Default::default(),
         report: Mutex::new(None),
+        edits: Default::default(),
+        token,
     })
+}
+
+/// The emitting objects and their emission as loaded, for animations.
+pub fn emitters(prepared: &Prepared) -> Vec<(String, [f64; 3])> {
+    let mut found: Vec<(String, [f64; 3])> = Vec::new();
+    for patch in prepared.mesh.patches.iter().filter(|p| p.emission.max_element() > 0.0) {
+        let name = &prepared.scene.objects[patch.object as usize].name;
+        if !found.iter().any(|(n, _)| n == name) {
+            found.push((name.clone(), patch.emission.to_array()));
+        }
+    }
+    found
 }

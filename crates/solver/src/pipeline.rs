@@ -143,64 +143,113 @@ pub fn solve_scene(scene: Scene, request: &SolveRequest, progress: &(dyn Fn(Prog
 /// Form factors and solve for a mesh already built from `scene` (the server meshes first so
 /// that viewers get the geometry while it solves). `seconds.mesh` holds the BVH build only.
 pub fn solve_mesh(scene: &Scene, mesh: &Mesh, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<(Vec<Rgb>, SolveReport), SolveError> {
-    let mut seconds = StageSeconds::default();
-    let mut clock = Instant::now();
-    let mut lap = |slot: &mut f64| {
-        *slot = clock.elapsed().as_secs_f64();
-        clock = Instant::now();
-    };
-    let n = mesh.patches.len();
-    let bytes = DenseFormFactors::memory_bytes(n);
-    if bytes > request.max_matrix_bytes {
-        let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
-        return Err(SolveError::TooLarge { patches: n, gib: gib(bytes), limit_gib: gib(request.max_matrix_bytes) });
-    }
-    let occluders = Occluders::new(scene);
-    lap(&mut seconds.mesh);
-
-    let form_factors = DenseFormFactors::compute(mesh, &occluders, &request.form_factors, progress);
-    lap(&mut seconds.form_factors);
-
-    let column = |f: fn(&crate::mesh::Patch) -> Rgb| mesh.patches.iter().map(f).collect::<Vec<_>>();
-    let (reflectance, emission) = (column(|p| p.reflectance), column(|p| p.emission));
-    let area: Vec<f64> = mesh.patches.iter().map(|p| p.area).collect();
-    let system = System { reflectance: &reflectance, emission: &emission, area: &area };
-    let SolveOutcome { radiosity, iterations, residual, converged } = solve(&form_factors, &system, &request.solver, None, progress);
-    lap(&mut seconds.solve);
-    seconds.total = seconds.mesh + seconds.form_factors + seconds.solve;
-
-    let report = SolveReport {
-        patches: n,
-        triangles: scene.triangle_count(),
-        skipped_faces: scene.skipped_degenerate_faces,
-        method: request.solver.method.name().into(),
-        iterations,
-        residual,
-        converged,
-        tolerance: request.solver.tolerance,
-        rays: form_factors.rays_cast,
-        seconds,
-        objects: object_means(scene, mesh, &radiosity),
-    };
-    Ok((radiosity, report))
+    let mut session = Session::new(scene, mesh, request, progress)?;
+    let report = session.solve(progress);
+    Ok((session.radiosity, report))
 }
 
-/// Area-weighted mean radiosity of every object.
-pub fn object_means(scene: &Scene, mesh: &Mesh, radiosity: &[Rgb]) -> Vec<ObjectRadiosity> {
-    let mut sums = vec![(0.0, Rgb::ZERO); scene.objects.len()];
-    for (patch, b) in mesh.patches.iter().zip(radiosity) {
-        let (area, power) = &mut sums[patch.object as usize];
-        *area += patch.area;
-        *power += *b * patch.area;
-    }
-    scene
-        .objects
-        .iter()
-        .zip(sums)
-        .map(|(object, (area, power))| ObjectRadiosity {
-            name: object.name.clone(),
-            area,
-            radiosity: if area > 0.0 { (power / area).to_array() } else { [0.0; 3] },
+/// A solved scene kept live: its form factors stay, so emission changes re-solve from the
+/// current answer (a warm start, a few iterations) without recomputing any form factor.
+pub struct Session {
+    form_factors: DenseFormFactors,
+    objects: Vec<String>,
+    patch_objects: Vec<u32>,
+    reflectance: Vec<Rgb>,
+    emission: Vec<Rgb>,
+    area: Vec<f64>,
+    settings: SolverSettings,
+    seconds: StageSeconds,
+    triangles: usize,
+    skipped_faces: usize,
+    /// Radiosity per patch, W/m^2: zero until the first [`Session::solve`].
+    pub radiosity: Vec<Rgb>,
+}
+
+/// An emission change that cannot be applied.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EditError {
+    /// No object has that name.
+    #[error("no object named '{0}'")]
+    UnknownObject(String),
+    /// Emission must be finite and non-negative.
+    #[error("emission {0:?} must have every channel finite and >= 0")]
+    InvalidEmission([f64; 3]),
+}
+
+impl Session {
+    /// Computes the form factors of `mesh`; nothing is solved yet.
+    pub fn new(scene: &Scene, mesh: &Mesh, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<Session, SolveError> {
+        let n = mesh.patches.len();
+        let bytes = DenseFormFactors::memory_bytes(n);
+        if bytes > request.max_matrix_bytes {
+            let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
+            return Err(SolveError::TooLarge { patches: n, gib: gib(bytes), limit_gib: gib(request.max_matrix_bytes) });
+        }
+        let mut seconds = StageSeconds::default();
+        let clock = Instant::now();
+        let occluders = Occluders::new(scene);
+        seconds.mesh = clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let form_factors = DenseFormFactors::compute(mesh, &occluders, &request.form_factors, progress);
+        seconds.form_factors = clock.elapsed().as_secs_f64();
+        let column = |f: fn(&crate::mesh::Patch) -> Rgb| mesh.patches.iter().map(f).collect::<Vec<_>>();
+        Ok(Session {
+            form_factors,
+            objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
+            patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
+            reflectance: column(|p| p.reflectance),
+            emission: column(|p| p.emission),
+            area: mesh.patches.iter().map(|p| p.area).collect(),
+            settings: request.solver,
+            seconds,
+            triangles: scene.triangle_count(),
+            skipped_faces: scene.skipped_degenerate_faces,
+            radiosity: vec![Rgb::ZERO; n],
         })
-        .collect()
+    }
+
+    /// Sets the emission of every patch of object `name`.
+    pub fn set_emission(&mut self, name: &str, emission: Rgb) -> Result<(), EditError> {
+        let object = self.objects.iter().position(|o| o == name).ok_or_else(|| EditError::UnknownObject(name.into()))? as u32;
+        if !emission.is_finite() || emission.min_element() < 0.0 {
+            return Err(EditError::InvalidEmission(emission.to_array()));
+        }
+        for (e, _) in self.emission.iter_mut().zip(&self.patch_objects).filter(|(_, o)| **o == object) {
+            *e = emission;
+        }
+        Ok(())
+    }
+
+    /// Solves from the current radiosity (zero the first time) and reports.
+    pub fn solve(&mut self, progress: &(dyn Fn(Progress) + Sync)) -> SolveReport {
+        let clock = Instant::now();
+        let system = System { reflectance: &self.reflectance, emission: &self.emission, area: &self.area };
+        let SolveOutcome { radiosity, iterations, residual, converged } = solve(&self.form_factors, &system, &self.settings, Some(&self.radiosity), progress);
+        self.radiosity = radiosity;
+        self.seconds.solve = clock.elapsed().as_secs_f64();
+        self.seconds.total = self.seconds.mesh + self.seconds.form_factors + self.seconds.solve;
+        let (mut area, mut power) = (vec![0.0; self.objects.len()], vec![Rgb::ZERO; self.objects.len()]);
+        for ((o, a), b) in self.patch_objects.iter().zip(&self.area).zip(&self.radiosity) {
+            area[*o as usize] += a;
+            power[*o as usize] += *b * *a;
+        }
+        SolveReport {
+            patches: self.radiosity.len(),
+            triangles: self.triangles,
+            skipped_faces: self.skipped_faces,
+            method: self.settings.method.name().into(),
+            iterations,
+            residual,
+            converged,
+            tolerance: self.settings.tolerance,
+            rays: self.form_factors.rays_cast,
+            seconds: self.seconds,
+            objects: self
+                .objects
+                .iter()
+                .zip(area.iter().zip(&power))
+                .map(|(name, (a, p))| ObjectRadiosity { name: name.clone(), area: *a, radiosity: if *a > 0.0 { (*p / *a).to_array() } else { [0.0; 3] } })
+                .collect(),
+        }
+    }
 }

@@ -1,0 +1,164 @@
+//! Changing emission on a running server: authentication, validation, coalescing, and viewers
+//! that end equal to a from-scratch solve of the edited scene.
+
+use futures_util::StreamExt;
+use server::solving::{prepare, serve_edits, shared_for, solve_and_publish};
+use server::{Limits, Shared, routes};
+use solver::{PatchTarget, Rgb, SolveRequest};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio_tungstenite::tungstenite::Message;
+use wire::{PatchBuffer, ServerMessage};
+
+const TOKEN: &str = "s3cret";
+const PATIENCE: Duration = Duration::from_secs(60);
+
+fn request() -> SolveRequest {
+    SolveRequest { patches: PatchTarget::Count(300), ..SolveRequest::default() }
+}
+
+async fn live_cornell() -> (SocketAddr, Arc<Shared>) {
+    let prepared = prepare("scenes/cornell-box.obj".as_ref(), request()).unwrap();
+    let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let address = listener.local_addr().unwrap();
+    tokio::spawn(axum::serve(listener, routes::router(shared.clone())).into_future());
+    let solver_side = shared.clone();
+    tokio::task::spawn_blocking(move || {
+        let solution = solve_and_publish(&prepared, &solver_side, None).unwrap();
+        serve_edits(&prepared, &solver_side, solution).unwrap();
+    });
+    (address, shared)
+}
+
+/// PUT with an optional bearer token; returns the status and the body.
+async fn put(address: SocketAddr, path: &str, token: Option<&str>, body: &str) -> (u16, String) {
+    let (url, body, token) = (format!("http://{address}{path}"), body.to_string(), token.map(str::to_string));
+    tokio::task::spawn_blocking(move || {
+        let agent: ureq::Agent = ureq::Agent::config_builder().http_status_as_error(false).build().into();
+        let mut request = agent.put(&url).header("Content-Type", "application/json");
+        if let Some(token) = token {
+            request = request.header("Authorization", &format!("Bearer {token}"));
+        }
+        let mut response = request.send(body.as_bytes()).unwrap();
+        (response.status().as_u16(), response.body_mut().read_to_string().unwrap())
+    })
+    .await
+    .unwrap()
+}
+
+/// A viewer that keeps its buffer current; `wait_for` reads until a final frame satisfies `done`.
+struct Viewer {
+    socket: tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>,
+    buffer: PatchBuffer,
+    deltas: Vec<usize>,
+}
+
+impl Viewer {
+    async fn connect(address: SocketAddr) -> Viewer {
+        let (socket, _) = tokio_tungstenite::connect_async(format!("ws://{address}/ws")).await.unwrap();
+        Viewer { socket, buffer: PatchBuffer::default(), deltas: Vec::new() }
+    }
+
+    async fn wait_for(&mut self, done: impl Fn(&PatchBuffer) -> bool) {
+        tokio::time::timeout(PATIENCE, async {
+            while !(self.buffer.info.is_some_and(|i| i.is_final) && done(&self.buffer)) {
+                let Some(Ok(Message::Binary(bytes))) = self.socket.next().await else { continue };
+                let message = ServerMessage::decode(&bytes).unwrap();
+                if let ServerMessage::Delta(delta) = &message {
+                    self.deltas.push(delta.indices.len());
+                }
+                self.buffer.apply(&message).expect("deltas apply to what the viewer holds");
+            }
+        })
+        .await
+        .expect("the expected state arrives");
+    }
+
+    fn version(&self) -> u64 {
+        self.buffer.info.map_or(0, |i| i.solution_version)
+    }
+}
+
+/// The Cornell box solved from scratch with the light's emission replaced.
+fn from_scratch(light: [f64; 3]) -> Vec<[f32; 3]> {
+    let mut scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+    let light_object = scene.objects.iter().position(|o| o.name == "light").unwrap() as u32;
+    scene.faces.iter_mut().filter(|f| f.object == light_object).for_each(|f| f.emission = Rgb::from(light));
+    let solved = solver::solve_scene(scene, &request(), &solver::no_progress).unwrap();
+    solved.radiosity.iter().map(|b| b.as_vec3().to_array()).collect()
+}
+
+/// Whether every patch is within two encodings (2^-9 each) and two solves (tolerance 1e-6) of
+/// `expected`; the first patch that is not, otherwise.
+fn mismatch(buffer: &PatchBuffer, expected: &[[f32; 3]]) -> Option<([f32; 3], [f32; 3])> {
+    let got = buffer.radiosity();
+    assert_eq!(got.len(), expected.len());
+    got.into_iter().zip(expected.iter().copied()).find(|(g, e)| {
+        let max = e.iter().cloned().fold(0.0, f32::max);
+        !g.iter().zip(e).all(|(a, b)| (a - b).abs() <= 2.0 * wire::rgb9e5::RELATIVE_ERROR_BOUND * max + 1e-6)
+    })
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_emission_change_reaches_every_viewer_as_a_delta_equal_to_a_fresh_solve() {
+    let (address, shared) = live_cornell().await;
+    let mut viewers = vec![Viewer::connect(address).await, Viewer::connect(address).await];
+    for v in &mut viewers {
+        v.wait_for(|_| true).await;
+    }
+    let before = viewers[0].version();
+    let (status, body) = put(address, "/api/objects/light/emission", Some(TOKEN), r#"{"emission": [5, 4, 3]}"#).await;
+    assert_eq!(status, 202, "{body}");
+    let expected = from_scratch([5.0, 4.0, 3.0]);
+    for v in &mut viewers {
+        v.wait_for(|b| b.info.unwrap().solution_version > before).await;
+        assert_eq!(mismatch(&v.buffer, &expected), None);
+        assert!(v.deltas.iter().all(|&changed| changed <= 300), "deltas carry only changed patches");
+    }
+    assert_eq!(viewers[0].buffer.colours, viewers[1].buffer.colours);
+    shared.edits.close();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_requests_are_refused_with_a_reason_and_change_nothing() {
+    let (address, shared) = live_cornell().await;
+    let mut viewer = Viewer::connect(address).await;
+    viewer.wait_for(|_| true).await;
+    let version = viewer.version();
+    let cases = [
+        ("/api/objects/light/emission", None, r#"{"emission": [1, 1, 1]}"#, 401, "missing or wrong bearer token"),
+        ("/api/objects/light/emission", Some("wrong"), r#"{"emission": [1, 1, 1]}"#, 401, "missing or wrong bearer token"),
+        ("/api/objects/lamp/emission", Some(TOKEN), r#"{"emission": [1, 1, 1]}"#, 404, "no object named 'lamp'"),
+        ("/api/objects/light/emission", Some(TOKEN), r#"{"emission": [1, -1, 1]}"#, 400, "must have every channel finite and >= 0"),
+        ("/api/objects/light/emission", Some(TOKEN), r#"{"emission": [NaN, 1, 1]}"#, 400, "body must be JSON like"),
+        ("/api/objects/light/emission", Some(TOKEN), r#"{"emission": [1, 1]}"#, 400, "body must be JSON like"),
+        ("/api/objects/light/emission", Some(TOKEN), r#"{"emision": [1, 1, 1]}"#, 400, "body must be JSON like"),
+    ];
+    for (path, token, body, status, reason) in cases {
+        let (got, text) = put(address, path, token, body).await;
+        assert_eq!(got, status, "{path} {body}: {text}");
+        assert!(text.contains(reason), "{text}");
+    }
+    // Every refusal came back before anything was queued: no edit is pending or was published.
+    assert_eq!(shared.edits.pending(), 0);
+    assert_eq!(shared.hub.current().version, version);
+    shared.edits.close();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rapid_changes_coalesce_and_the_newest_wins() {
+    let (address, shared) = live_cornell().await;
+    let mut viewer = Viewer::connect(address).await;
+    viewer.wait_for(|_| true).await;
+    let before = viewer.version();
+    for level in 1..=30 {
+        let (status, _) = put(address, "/api/objects/light/emission", Some(TOKEN), &format!(r#"{{"emission": [{level}, {level}, {level}]}}"#)).await;
+        assert_eq!(status, 202);
+    }
+    let expected = from_scratch([30.0; 3]);
+    viewer.wait_for(|b| mismatch(b, &expected).is_none()).await;
+    assert!(viewer.version() - before <= 30, "at most one version per edit: {}", viewer.version() - before);
+    shared.edits.close();
+}
