@@ -1,6 +1,7 @@
 //! The headless radcast viewer: fetch geometry, follow the stream until the solution is final,
 //! render it from any camera. It links the wire protocol only, never the solver.
 
+pub mod load;
 pub mod render;
 pub mod session;
 
@@ -26,6 +27,16 @@ pub fn http_get(url: &str, limit: u64) -> anyhow::Result<Vec<u8>> {
 pub fn fetch_geometry(base: &str) -> anyhow::Result<wire::Geometry> {
     let bytes = http_get(&format!("{base}/api/scene"), 1 << 30)?;
     wire::Geometry::decode(&bytes).with_context(|| format!("{base}/api/scene"))
+}
+
+/// `/metrics` as text.
+pub fn fetch_metrics(base: &str) -> anyhow::Result<String> {
+    String::from_utf8(http_get(&format!("{base}/metrics"), 1 << 20)?).with_context(|| format!("{base}/metrics is not UTF-8"))
+}
+
+/// Raises this process's open-file limit to the hard limit (one descriptor per viewer).
+pub fn raise_file_limit() -> u64 {
+    rlimit::increase_nofile_limit(u64::MAX).unwrap_or(0)
 }
 
 /// `/api/solution` as JSON.

@@ -42,6 +42,37 @@ enum Command {
         #[arg(long, default_value_t = 600.0)]
         timeout: f64,
     },
+    /// Stay connected and print every update (version, patches changed, bytes, latency).
+    Watch {
+        /// The server's stream.
+        #[arg(long, default_value = "ws://127.0.0.1:8080/ws")]
+        url: String,
+        /// Render a PNG of every final update into this folder.
+        #[arg(long)]
+        out_dir: Option<PathBuf>,
+        /// Stop after this many updates (default: run until interrupted).
+        #[arg(long)]
+        updates: Option<u64>,
+    },
+    /// Load test: open many viewers in this process, each decoding every frame, and report
+    /// connection times, frame latency percentiles, traffic and the server's own figures.
+    Load {
+        /// The server's stream.
+        #[arg(long, default_value = "ws://127.0.0.1:8080/ws")]
+        url: String,
+        /// Viewers to open.
+        #[arg(long, default_value_t = 100)]
+        clients: usize,
+        /// Seconds over which to spread the connections.
+        #[arg(long, default_value_t = 1.0)]
+        ramp: f64,
+        /// Seconds to keep every viewer connected after the ramp.
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Print one JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 fn output_path(out: &Path, viewer: usize, viewers: usize, camera: usize, cameras: usize) -> PathBuf {
@@ -58,7 +89,109 @@ fn output_path(out: &Path, viewer: usize, viewers: usize, camera: usize, cameras
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
-    let Command::View { url, out, cameras, width, height, clients, timeout } = Cli::parse().command;
+    match Cli::parse().command {
+        Command::View { url, out, cameras, width, height, clients, timeout } => view(url, out, cameras, width, height, clients, timeout).await,
+        Command::Watch { url, out_dir, updates } => watch(&url, out_dir, updates).await,
+        Command::Load { url, clients, ramp, duration, json } => load(url, clients, ramp, duration, json).await,
+    }
+}
+
+fn positive_seconds(value: f64, flag: &str) -> anyhow::Result<Duration> {
+    Duration::try_from_secs_f64(value).with_context(|| format!("--{flag} must be a non-negative number of seconds, got {value}"))
+}
+
+async fn load(url: String, clients: usize, ramp: f64, duration: f64, json: bool) -> anyhow::Result<()> {
+    if clients == 0 {
+        bail!("--clients must be at least 1");
+    }
+    let (ramp, duration) = (positive_seconds(ramp, "ramp")?, positive_seconds(duration, "duration")?);
+    let base = http_base(&url)?;
+    let limit = client::raise_file_limit();
+    if (limit as usize) < clients + 64 {
+        eprintln!("warning: the open-file limit is {limit}; {clients} viewers may fail to connect");
+    }
+    let deadline = std::time::Instant::now() + ramp + duration;
+    let viewers: Vec<_> = (0..clients)
+        .map(|k| tokio::spawn(client::load::run_viewer(url.clone(), ramp.mul_f64(k as f64 / clients as f64), deadline)))
+        .collect();
+    let mut stats = Vec::with_capacity(clients);
+    for viewer in viewers {
+        stats.push(viewer.await?);
+    }
+    let metrics = tokio::task::spawn_blocking(move || client::fetch_metrics(&base)).await?.map(|t| client::load::parse_metrics(&t)).unwrap_or_default();
+    let report = client::load::summarize(stats, metrics);
+    if json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        let l = report.latency_ms;
+        println!("viewers   {} asked, {} connected, {} failed {:?}", report.clients, report.connected, report.failed, report.failures);
+        println!("connect   p50 {:.1} ms, p99 {:.1} ms; first frame p50 {:.1} ms, p99 {:.1} ms", report.connect_ms.p50, report.connect_ms.p99, report.first_frame_ms.p50, report.first_frame_ms.p99);
+        println!("latency   p50 {:.1} ms, p90 {:.1} ms, p99 {:.1} ms, max {:.1} ms", l.p50, l.p90, l.p99, l.max);
+        println!("traffic   {} frames, {} bytes; per viewer {}..{} frames; {} resyncs", report.frames, report.bytes, report.frames_per_viewer[0], report.frames_per_viewer[1], report.resyncs);
+        for (name, value) in report.server.iter().filter(|(n, _)| !n.starts_with("radcast_solve")) {
+            println!("server    {name} {value}");
+        }
+    }
+    Ok(())
+}
+
+async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> anyhow::Result<()> {
+    use futures_util::{SinkExt, StreamExt};
+    use tokio_tungstenite::tungstenite::Message;
+    use wire::{ClientMessage, PatchBuffer, ServerMessage};
+    let geometry = match &out_dir {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+            let base = http_base(url)?;
+            Some(tokio::task::spawn_blocking(move || fetch_geometry(&base)).await??)
+        }
+        None => None,
+    };
+    let (mut socket, _) = tokio_tungstenite::connect_async(url).await.with_context(|| format!("connecting to {url}"))?;
+    let mut buffer = PatchBuffer::default();
+    let mut seen = 0u64;
+    while let Some(message) = socket.next().await {
+        let Message::Binary(data) = message? else { continue };
+        let message = ServerMessage::decode(&data)?;
+        let (changed, sent_at) = match &message {
+            ServerMessage::Hello(hello) => {
+                println!("hello: scene {:016x}, {} patches, protocol {}", hello.scene_id, hello.patch_count, hello.protocol_version);
+                continue;
+            }
+            ServerMessage::Full(frame) => {
+                let changed = if buffer.colours.len() == frame.colours.len() { wire::changes(&buffer.colours, &frame.colours).0.len() } else { frame.colours.len() };
+                (changed, frame.info.sent_at_unix_micros)
+            }
+            ServerMessage::Delta(frame) => (frame.indices.len(), frame.info.sent_at_unix_micros),
+        };
+        if buffer.apply(&message).is_err() {
+            socket.send(Message::Binary(ClientMessage::RequestFull.encode().into())).await?;
+            continue;
+        }
+        let info = buffer.info.context("a frame was applied")?;
+        let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?.as_micros() as u64;
+        let kind = if matches!(message, ServerMessage::Full(_)) { "full" } else { "delta" };
+        println!(
+            "version {}: {kind}, {changed} patches changed, {} bytes, latency {:.1} ms{}",
+            info.solution_version,
+            data.len(),
+            now.saturating_sub(sent_at) as f64 / 1e3,
+            if info.is_final { ", final" } else { "" }
+        );
+        if let (Some(dir), Some(geometry), true) = (&out_dir, &geometry, info.is_final) {
+            let path = dir.join(format!("version-{:06}.png", info.solution_version));
+            render(geometry, &buffer, &View::for_scene(geometry), 512, 512).write_png(&path)?;
+        }
+        seen += 1;
+        if updates.is_some_and(|n| seen >= n) {
+            socket.close(None).await?;
+            break;
+        }
+    }
+    Ok(())
+}
+
+async fn view(url: String, out: PathBuf, cameras: Vec<View>, width: u32, height: u32, clients: usize, timeout: f64) -> anyhow::Result<()> {
     if clients == 0 || width == 0 || height == 0 {
         bail!("--clients, --width and --height must be at least 1");
     }

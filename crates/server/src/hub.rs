@@ -47,9 +47,15 @@ fn now_micros() -> u64 {
     SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_micros() as u64)
 }
 
-fn encode(radiosity: &[[f32; 3]]) -> (f32, Vec<u32>) {
+/// Headroom a frame may leave unused before the scale is lowered: 2^8. Keeping the previous
+/// scale while the brightest value moves within that band lets changing lights travel as
+/// deltas instead of full frames; it costs precision only on patches 2^23 below the brightest.
+const SCALE_HEADROOM: f32 = 256.0;
+
+fn encode(radiosity: &[[f32; 3]], previous_scale: Option<f32>) -> (f32, Vec<u32>) {
     let brightest = radiosity.iter().flatten().copied().filter(|c| c.is_finite()).fold(0.0, f32::max);
-    let scale = wire::scale_for(brightest);
+    let fits = |scale: f32| brightest <= wire::rgb9e5::MAX_VALUE * scale && brightest * SCALE_HEADROOM >= wire::rgb9e5::MAX_VALUE * scale;
+    let scale = previous_scale.filter(|s| fits(*s)).unwrap_or_else(|| wire::scale_for(brightest));
     (scale, radiosity.iter().map(|rgb| wire::encode_colour(*rgb, scale)).collect())
 }
 
@@ -58,7 +64,7 @@ impl Hub {
     pub fn new(scene_id: u64, geometry: &Geometry, initial: &[[f32; 3]]) -> Hub {
         let patch_count = geometry.patches.len() as u32;
         let hello = Hello { protocol_version: PROTOCOL_VERSION, scene_id, geometry_version: 1, patch_count };
-        let (scale, colours) = encode(initial);
+        let (scale, colours) = encode(initial, None);
         let first = Self::frames(1, false, scale, colours, None);
         Hub {
             sender: watch::Sender::new(Arc::new(first)),
@@ -84,8 +90,8 @@ impl Hub {
     /// Publishes a new state (radiosity in W/m^2) unless it encodes to what viewers already
     /// have; returns the version viewers will hold.
     pub fn publish(&self, radiosity: &[[f32; 3]], is_final: bool) -> u64 {
-        let (scale, colours) = encode(radiosity);
         let previous = self.current();
+        let (scale, colours) = encode(radiosity, Some(previous.scale));
         if previous.scale == scale && *previous.colours == colours && previous.is_final == is_final {
             return previous.version;
         }

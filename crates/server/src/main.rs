@@ -65,6 +65,8 @@ fn seconds(value: f64, flag: &str) -> anyhow::Result<Duration> {
 async fn main() -> anyhow::Result<()> {
     tracing_subscriber::fmt().with_writer(std::io::stderr).with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into())).init();
     let args = Args::parse();
+    // One descriptor per viewer: take the hard limit.
+    let _ = rlimit::increase_nofile_limit(u64::MAX);
     anyhow::ensure!(args.patches > 0, "--patches must be at least 1");
     anyhow::ensure!(args.tolerance > 0.0 && args.tolerance < 1.0, "--tolerance must be in (0, 1), got {}", args.tolerance);
     let request = SolveRequest {

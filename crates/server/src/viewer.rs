@@ -34,6 +34,19 @@ pub fn try_admit(shared: &Arc<Shared>) -> Option<ViewerSlot> {
     }
 }
 
+/// Why a read failed: `Some(reason)` when the viewer broke the protocol (an oversized or
+/// malformed message), `None` when it just went away (reset, closed socket).
+fn classify(error: axum::Error) -> Option<&'static str> {
+    use tokio_tungstenite::tungstenite::Error;
+    match error.into_inner().downcast::<Error>().map(|e| *e) {
+        Ok(Error::Capacity(_)) => Some("message too large"),
+        Ok(Error::Protocol(tokio_tungstenite::tungstenite::error::ProtocolError::ResetWithoutClosingHandshake)) => None,
+        Ok(Error::ConnectionClosed | Error::AlreadyClosed | Error::Io(_)) => None,
+        Ok(_) => Some("malformed WebSocket message"),
+        Err(_) => None,
+    }
+}
+
 /// What ended a session.
 enum End {
     Left,
@@ -95,8 +108,10 @@ pub async fn serve_viewer(socket: WebSocket, slot: ViewerSlot) {
                         Some(Ok(Message::Text(_))) => break 'session End::Dropped(DropReason::BadMessage, "text messages are not part of the protocol"),
                         Some(Ok(Message::Ping(_) | Message::Pong(_))) => continue,
                         Some(Ok(Message::Close(_))) | None => break 'session End::Left,
-                        // Oversized or malformed WebSocket frames surface here.
-                        Some(Err(_)) => break 'session End::Dropped(DropReason::BadMessage, "malformed or oversized message"),
+                        Some(Err(error)) => match classify(error) {
+                            Some(text) => break 'session End::Dropped(DropReason::BadMessage, text),
+                            None => break 'session End::Left,
+                        },
                     }
                 }
                 _ = ping.tick() => {

@@ -5,7 +5,7 @@ use wire::frame::{FLAG_COMPRESSED, MAX_PATCHES};
 use wire::*;
 
 fn info(version: u64, patch_count: u32, is_final: bool) -> FrameInfo {
-    FrameInfo { solution_version: version, sent_at_unix_micros: 1_700_000_000_000_000 + version, scale: 0.5, patch_count, is_final }
+    FrameInfo { solution_version: version, sent_at_unix_micros: version.wrapping_add(1_700_000_000_000_000), scale: 0.5, patch_count, is_final }
 }
 
 fn full(colours: Vec<u32>) -> ServerMessage {

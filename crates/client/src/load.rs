@@ -1,0 +1,218 @@
+//! `radcast-client load`: many viewers in one process, each decoding and applying every frame
+//! like a real one, with latency measured from the server's send stamp in each frame.
+
+use futures_util::{SinkExt, StreamExt};
+use serde::Serialize;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use tokio_tungstenite::tungstenite::Message;
+use wire::{ApplyError, ClientMessage, PatchBuffer, ServerMessage};
+
+/// What one viewer saw.
+#[derive(Debug, Default)]
+pub struct ViewerStats {
+    /// Connected at all.
+    pub connected: bool,
+    /// The reason it failed, if it did.
+    pub failure: Option<String>,
+    /// Time to complete the WebSocket handshake.
+    pub connect: Duration,
+    /// Time from connecting to the first full frame.
+    pub first_frame: Option<Duration>,
+    /// Frames applied.
+    pub frames: u64,
+    /// Bytes received in frames.
+    pub bytes: u64,
+    /// Full frames asked for after a delta with a foreign base.
+    pub resyncs: u64,
+    /// Frame latencies, microseconds (receive time minus the frame's send stamp), for frames
+    /// published after the viewer connected: the frame a viewer joins with carries the stamp
+    /// of a state published earlier, which measures its age, not delivery.
+    pub latencies_us: Vec<u64>,
+}
+
+fn now_micros() -> u64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_micros() as u64)
+}
+
+/// One viewer: connect after `delay`, follow frames until `deadline`.
+pub async fn run_viewer(url: String, delay: Duration, deadline: Instant) -> ViewerStats {
+    tokio::time::sleep(delay).await; // the ramp: spreads connection attempts, not synchronisation
+    let mut stats = ViewerStats::default();
+    let start = Instant::now();
+    let connected = tokio::time::timeout(deadline.saturating_duration_since(Instant::now()), tokio_tungstenite::connect_async(&url)).await;
+    let mut socket = match connected {
+        Ok(Ok((socket, _))) => socket,
+        Ok(Err(error)) => {
+            stats.failure = Some(error.to_string());
+            return stats;
+        }
+        Err(_) => {
+            stats.failure = Some("connect timed out".into());
+            return stats;
+        }
+    };
+    stats.connected = true;
+    stats.connect = start.elapsed();
+    let joined_at = now_micros();
+    let mut buffer = PatchBuffer::default();
+    loop {
+        let next = tokio::time::timeout(deadline.saturating_duration_since(Instant::now()), socket.next()).await;
+        let data = match next {
+            Err(_) => break, // the run is over
+            Ok(Some(Ok(Message::Binary(data)))) => data,
+            Ok(Some(Ok(Message::Close(_)))) | Ok(None) => {
+                stats.failure = Some("the server closed the connection".into());
+                break;
+            }
+            Ok(Some(Ok(_))) => continue,
+            Ok(Some(Err(error))) => {
+                stats.failure = Some(error.to_string());
+                break;
+            }
+        };
+        let received = now_micros();
+        let message = match ServerMessage::decode(&data) {
+            Ok(message) => message,
+            Err(error) => {
+                stats.failure = Some(format!("bad frame: {error}"));
+                break;
+            }
+        };
+        let sent_at = match &message {
+            ServerMessage::Hello(_) => continue,
+            ServerMessage::Full(frame) => frame.info.sent_at_unix_micros,
+            ServerMessage::Delta(frame) => frame.info.sent_at_unix_micros,
+        };
+        match buffer.apply(&message) {
+            Ok(()) => {
+                stats.frames += 1;
+                stats.bytes += data.len() as u64;
+                if sent_at >= joined_at {
+                    stats.latencies_us.push(received.saturating_sub(sent_at));
+                }
+                stats.first_frame.get_or_insert_with(|| start.elapsed());
+            }
+            Err(ApplyError::BaseMismatch { .. }) => {
+                stats.resyncs += 1;
+                if socket.send(Message::Binary(ClientMessage::RequestFull.encode().into())).await.is_err() {
+                    break;
+                }
+            }
+        }
+    }
+    let _ = socket.close(None).await;
+    stats
+}
+
+/// Percentiles in milliseconds.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct Percentiles {
+    /// Median.
+    pub p50: f64,
+    /// 90th percentile.
+    pub p90: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+impl Percentiles {
+    /// Nearest-rank percentiles of `values` (microseconds), in milliseconds.
+    pub fn of(mut values: Vec<u64>) -> Percentiles {
+        if values.is_empty() {
+            return Percentiles::default();
+        }
+        values.sort_unstable();
+        let rank = |q: f64| values[((q * values.len() as f64).ceil() as usize).clamp(1, values.len()) - 1] as f64 / 1e3;
+        Percentiles { p50: rank(0.50), p90: rank(0.90), p99: rank(0.99), max: *values.last().unwrap_or(&0) as f64 / 1e3 }
+    }
+}
+
+/// The summary `load --json` prints.
+#[derive(Debug, Serialize)]
+pub struct LoadReport {
+    /// Viewers asked for.
+    pub clients: usize,
+    /// Viewers that connected.
+    pub connected: usize,
+    /// Viewers that failed to connect or were disconnected.
+    pub failed: usize,
+    /// The most common failure reasons, with counts.
+    pub failures: Vec<(String, usize)>,
+    /// WebSocket handshake time.
+    pub connect_ms: Percentiles,
+    /// Time from connecting to the first full frame.
+    pub first_frame_ms: Percentiles,
+    /// Frame latency from the server's send stamp.
+    pub latency_ms: Percentiles,
+    /// Frames applied, all viewers.
+    pub frames: u64,
+    /// Frame bytes received, all viewers.
+    pub bytes: u64,
+    /// Frames per connected viewer, fewest and most.
+    pub frames_per_viewer: [u64; 2],
+    /// Full frames requested after foreign deltas.
+    pub resyncs: u64,
+    /// The server's `/metrics` after the run (name with labels -> value).
+    pub server: Vec<(String, f64)>,
+}
+
+/// Aggregates per-viewer stats.
+pub fn summarize(stats: Vec<ViewerStats>, server: Vec<(String, f64)>) -> LoadReport {
+    let clients = stats.len();
+    let connected: Vec<&ViewerStats> = stats.iter().filter(|s| s.connected).collect();
+    let mut failures: Vec<(String, usize)> = Vec::new();
+    for reason in stats.iter().filter_map(|s| s.failure.clone()) {
+        match failures.iter_mut().find(|(r, _)| *r == reason) {
+            Some((_, n)) => *n += 1,
+            None => failures.push((reason, 1)),
+        }
+    }
+    failures.sort_by(|a, b| b.1.cmp(&a.1));
+    failures.truncate(5);
+    let micros = |d: Duration| d.as_micros() as u64;
+    LoadReport {
+        clients,
+        connected: connected.len(),
+        failed: stats.iter().filter(|s| s.failure.is_some()).count(),
+        failures,
+        connect_ms: Percentiles::of(connected.iter().map(|s| micros(s.connect)).collect()),
+        first_frame_ms: Percentiles::of(connected.iter().filter_map(|s| s.first_frame.map(micros)).collect()),
+        latency_ms: Percentiles::of(stats.iter().flat_map(|s| s.latencies_us.iter().copied()).collect()),
+        frames: stats.iter().map(|s| s.frames).sum(),
+        bytes: stats.iter().map(|s| s.bytes).sum(),
+        frames_per_viewer: [connected.iter().map(|s| s.frames).min().unwrap_or(0), connected.iter().map(|s| s.frames).max().unwrap_or(0)],
+        resyncs: stats.iter().map(|s| s.resyncs).sum(),
+        server,
+    }
+}
+
+/// Parses Prometheus text into (name with labels, value) pairs, skipping comments.
+pub fn parse_metrics(text: &str) -> Vec<(String, f64)> {
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .filter_map(|l| {
+            let (name, value) = l.rsplit_once(' ')?;
+            Some((name.to_string(), value.parse().ok()?))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_use_nearest_rank() {
+        let p = Percentiles::of((1..=100).map(|ms| ms * 1000).collect());
+        assert_eq!((p.p50, p.p90, p.p99, p.max), (50.0, 90.0, 99.0, 100.0));
+        assert_eq!(Percentiles::of(vec![]).max, 0.0);
+    }
+
+    #[test]
+    fn metrics_text_parses_with_labels() {
+        let parsed = parse_metrics("# HELP x y\nradcast_viewers 3\nradcast_viewers_dropped_total{reason=\"slow\"} 1\n");
+        assert_eq!(parsed, [("radcast_viewers".to_string(), 3.0), ("radcast_viewers_dropped_total{reason=\"slow\"}".to_string(), 1.0)]);
+    }
+}
