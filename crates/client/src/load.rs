@@ -34,14 +34,21 @@ fn now_micros() -> u64 {
     SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_micros() as u64)
 }
 
+/// Connects with buffers sized for one viewer of many: tungstenite's 128 KiB defaults, times
+/// thousands of viewers in one process, cost more than the frames themselves.
+async fn connect(url: &str) -> Result<crate::session::Socket, tokio_tungstenite::tungstenite::Error> {
+    let config = tokio_tungstenite::tungstenite::protocol::WebSocketConfig::default().read_buffer_size(16 * 1024).write_buffer_size(0);
+    Ok(tokio_tungstenite::connect_async_with_config(url, Some(config), false).await?.0)
+}
+
 /// One viewer: connect after `delay`, follow frames until `deadline`.
 pub async fn run_viewer(url: String, delay: Duration, deadline: Instant) -> ViewerStats {
     tokio::time::sleep(delay).await; // the ramp: spreads connection attempts, not synchronisation
     let mut stats = ViewerStats::default();
     let start = Instant::now();
-    let connected = tokio::time::timeout(deadline.saturating_duration_since(Instant::now()), tokio_tungstenite::connect_async(&url)).await;
+    let connected = tokio::time::timeout(deadline.saturating_duration_since(Instant::now()), connect(&url)).await;
     let mut socket = match connected {
-        Ok(Ok((socket, _))) => socket,
+        Ok(Ok(socket)) => socket,
         Ok(Err(error)) => {
             stats.failure = Some(error.to_string());
             return stats;

@@ -6,6 +6,9 @@ use std::time::{Duration, Instant};
 use tokio_tungstenite::tungstenite::Message;
 use wire::{ApplyError, ClientMessage, Hello, PatchBuffer, ServerMessage};
 
+/// A viewer's WebSocket.
+pub type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
 /// What a viewer ended with.
 #[derive(Debug)]
 pub struct ViewerOutcome {

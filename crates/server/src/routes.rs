@@ -94,7 +94,11 @@ async fn websocket(State(shared): State<Arc<Shared>>, upgrade: WebSocketUpgrade)
         return (StatusCode::SERVICE_UNAVAILABLE, "radcast-server: viewer limit reached\n").into_response();
     };
     let limits = shared.limits;
+    // Viewers send only tiny control messages and every frame is flushed as it is sent, so
+    // small buffers do: tungstenite's 128 KiB defaults made each idle viewer cost 144 KB.
     upgrade
+        .read_buffer_size(4096)
+        .write_buffer_size(0)
         .max_message_size(limits.max_message_bytes)
         .max_frame_size(limits.max_message_bytes)
         .on_upgrade(move |socket| serve_viewer(socket, slot))

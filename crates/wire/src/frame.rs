@@ -5,6 +5,7 @@
 
 use crate::DecodeError;
 use bincode::{Decode, Encode};
+use std::borrow::Cow;
 
 /// The protocol version this crate speaks; a [`Hello`] with another one is refused.
 pub const PROTOCOL_VERSION: u16 = 1;
@@ -284,10 +285,11 @@ fn decode_header<T: Decode<()>>(bytes: &[u8]) -> Result<(T, usize), DecodeError>
     bincode::decode_from_slice(bytes, config()).map_err(|e| DecodeError::Header(e.to_string()))
 }
 
-/// The payload, decompressed if flagged; refuses to inflate beyond `limit` bytes.
-fn take_payload(bytes: &[u8], flags: u8, limit: usize) -> Result<Vec<u8>, DecodeError> {
+/// The payload, decompressed if flagged (borrowed when not); refuses to inflate beyond
+/// `limit` bytes.
+fn take_payload(bytes: &[u8], flags: u8, limit: usize) -> Result<Cow<'_, [u8]>, DecodeError> {
     if flags & FLAG_COMPRESSED == 0 {
-        return Ok(bytes.to_vec());
+        return Ok(Cow::Borrowed(bytes));
     }
     let [a, b, c, d, block @ ..] = bytes else {
         return Err(DecodeError::Truncated { what: "compressed payload size", needed: 4, got: bytes.len() });
@@ -301,7 +303,7 @@ fn take_payload(bytes: &[u8], flags: u8, limit: usize) -> Result<Vec<u8>, Decode
     if written != size {
         return Err(DecodeError::Length { what: "decompressed payload", expected: size, got: written });
     }
-    Ok(out)
+    Ok(Cow::Owned(out))
 }
 
 fn write_varint(out: &mut Vec<u8>, mut value: u32) {
