@@ -26,8 +26,8 @@ wait_final() { # PORT
   for _ in $(seq 600); do curl -sf "http://127.0.0.1:$1/api/solution" | grep -q '"is_final":true' && return; sleep 0.1; done
 }
 
-echo "| viewers | connected | failed | latency p50 ms | p90 ms | p99 ms | max ms | frames/viewer | server CPU % | server peak RSS MiB |"
-echo "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+echo "| viewers | connected | failed | latency p50 ms | p90 ms | p99 ms | max ms | frames/viewer | server CPU % | tester CPU % | server peak RSS MiB |"
+echo "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
 hz=$(getconf CLK_TCK)
 for n in "${counts[@]}"; do
   start_server 18080 --animate
@@ -42,7 +42,8 @@ import json, sys
 r = json.loads(sys.argv[1]); before, after, t0, t1, hz, peak = map(float, sys.argv[2:])
 l = r["latency_ms"]; fpv = r["frames_per_viewer"]
 cpu = 100 * (after - before) / hz / (t1 - t0)
-print(f"| {r['clients']} | {r['connected']} | {r['failed']} | {l['p50']:.1f} | {l['p90']:.1f} | {l['p99']:.1f} | {l['max']:.1f} | {fpv[0]}..{fpv[1]} | {cpu:.0f} | {peak/1024:.0f} |")
+tester = r.get("load_tester_cpu_percent") or 0
+print(f"| {r['clients']} | {r['connected']} | {r['failed']} | {l['p50']:.1f} | {l['p90']:.1f} | {l['p99']:.1f} | {l['max']:.1f} | {fpv[0]}..{fpv[1]} | {cpu:.0f} | {tester:.0f} | {peak/1024:.0f} |")
 PY
 done
 

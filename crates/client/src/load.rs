@@ -24,6 +24,8 @@ pub struct ViewerStats {
     pub bytes: u64,
     /// Full frames asked for after a delta with a foreign base.
     pub resyncs: u64,
+    /// Every applied frame as (send stamp, receive time), microseconds since the Unix epoch.
+    pub arrivals: Vec<(u64, u64)>,
     /// Frame latencies, microseconds (receive time minus the frame's send stamp), for frames
     /// published after the viewer connected: the frame a viewer joins with carries the stamp
     /// of a state published earlier, which measures its age, not delivery.
@@ -94,6 +96,7 @@ pub async fn run_viewer(url: String, delay: Duration, deadline: Instant) -> View
             Ok(()) => {
                 stats.frames += 1;
                 stats.bytes += data.len() as u64;
+                stats.arrivals.push((sent_at, received));
                 if sent_at >= joined_at {
                     stats.latencies_us.push(received.saturating_sub(sent_at));
                 }
@@ -161,12 +164,44 @@ pub struct LoadReport {
     pub frames_per_viewer: [u64; 2],
     /// Full frames requested after foreign deltas.
     pub resyncs: u64,
+    /// Per edit issued with `--edit`: milliseconds from the PUT until the last viewer applied a
+    /// frame published after it (the frame carrying the edit).
+    pub edit_to_last_viewer_ms: Vec<f64>,
+    /// CPU this load tester used during the run, percent of one core (Linux; absent elsewhere):
+    /// on one machine it competes with the server, which bounds what latency can show.
+    pub load_tester_cpu_percent: Option<f64>,
     /// The server's `/metrics` after the run (name with labels -> value).
     pub server: Vec<(String, f64)>,
 }
 
+/// CPU seconds this process has used (user + system), from `/proc/self/stat` (Linux reports
+/// them in USER_HZ, 100 per second on every mainstream kernel).
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name; utime and stime are the 12th and 13th.
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
+/// For each edit time (µs since the epoch), the time until the last connected viewer applied a
+/// frame sent at or after it; edits some viewer never saw are left out.
+pub fn edit_latencies(stats: &[ViewerStats], edits_us: &[u64]) -> Vec<f64> {
+    edits_us
+        .iter()
+        .filter_map(|&edit| {
+            let per_viewer: Option<Vec<u64>> = stats
+                .iter()
+                .filter(|s| s.connected)
+                .map(|s| s.arrivals.iter().find(|(sent, _)| *sent >= edit).map(|(_, received)| received.saturating_sub(edit)))
+                .collect();
+            per_viewer.and_then(|v| v.into_iter().max()).map(|us| us as f64 / 1e3)
+        })
+        .collect()
+}
+
 /// Aggregates per-viewer stats.
-pub fn summarize(stats: Vec<ViewerStats>, server: Vec<(String, f64)>) -> LoadReport {
+pub fn summarize(stats: Vec<ViewerStats>, server: Vec<(String, f64)>, load_tester_cpu_percent: Option<f64>, edits_us: &[u64]) -> LoadReport {
     let clients = stats.len();
     let connected: Vec<&ViewerStats> = stats.iter().filter(|s| s.connected).collect();
     let mut failures: Vec<(String, usize)> = Vec::new();
@@ -191,6 +226,8 @@ pub fn summarize(stats: Vec<ViewerStats>, server: Vec<(String, f64)>) -> LoadRep
         bytes: stats.iter().map(|s| s.bytes).sum(),
         frames_per_viewer: [connected.iter().map(|s| s.frames).min().unwrap_or(0), connected.iter().map(|s| s.frames).max().unwrap_or(0)],
         resyncs: stats.iter().map(|s| s.resyncs).sum(),
+        edit_to_last_viewer_ms: edit_latencies(&stats, edits_us),
+        load_tester_cpu_percent,
         server,
     }
 }
@@ -215,6 +252,15 @@ mod tests {
         let p = Percentiles::of((1..=100).map(|ms| ms * 1000).collect());
         assert_eq!((p.p50, p.p90, p.p99, p.max), (50.0, 90.0, 99.0, 100.0));
         assert_eq!(Percentiles::of(vec![]).max, 0.0);
+    }
+
+    #[test]
+    fn edit_latency_is_the_slowest_viewers_first_frame_after_the_edit() {
+        let viewer = |arrivals: Vec<(u64, u64)>| ViewerStats { connected: true, arrivals, ..Default::default() };
+        let stats = [viewer(vec![(100, 150), (1000, 1010)]), viewer(vec![(100, 120), (1000, 1040), (2000, 2001)])];
+        assert_eq!(edit_latencies(&stats, &[990]), [0.05]);
+        // An edit the first viewer never saw a frame for is left out.
+        assert!(edit_latencies(&stats, &[1500]).is_empty());
     }
 
     #[test]

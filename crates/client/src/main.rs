@@ -72,6 +72,16 @@ enum Command {
         /// Print one JSON object instead of text.
         #[arg(long)]
         json: bool,
+        /// Also change this object's emission once a second (alternating half and full
+        /// --edit-emission) and report how long each edit took to reach the last viewer.
+        #[arg(long, requires = "token")]
+        edit: Option<String>,
+        /// Emission for --edit, `r,g,b`.
+        #[arg(long, default_value = "17,12,4")]
+        edit_emission: String,
+        /// The server's control token, for --edit.
+        #[arg(long, env = "RADCAST_TOKEN", hide_env_values = true)]
+        token: Option<String>,
     },
 }
 
@@ -92,7 +102,13 @@ async fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::View { url, out, cameras, width, height, clients, timeout } => view(url, out, cameras, width, height, clients, timeout).await,
         Command::Watch { url, out_dir, updates } => watch(&url, out_dir, updates).await,
-        Command::Load { url, clients, ramp, duration, json } => load(url, clients, ramp, duration, json).await,
+        Command::Load { url, clients, ramp, duration, json, edit, edit_emission, token } => {
+            let edits = match edit {
+                Some(object) => Some(Editor::new(&url, object, &edit_emission, token.unwrap_or_default())?),
+                None => None,
+            };
+            load(url, clients, ramp, duration, json, edits).await
+        }
     }
 }
 
@@ -100,7 +116,32 @@ fn positive_seconds(value: f64, flag: &str) -> anyhow::Result<Duration> {
     Duration::try_from_secs_f64(value).with_context(|| format!("--{flag} must be a non-negative number of seconds, got {value}"))
 }
 
-async fn load(url: String, clients: usize, ramp: f64, duration: f64, json: bool) -> anyhow::Result<()> {
+/// Emission edits issued during a load run.
+struct Editor {
+    url: String,
+    token: String,
+    emission: [f64; 3],
+}
+
+impl Editor {
+    fn new(ws_url: &str, object: String, emission: &str, token: String) -> anyhow::Result<Editor> {
+        let values: Vec<f64> = emission.split(',').map(|v| v.trim().parse::<f64>()).collect::<Result<_, _>>().with_context(|| format!("--edit-emission '{emission}' is not r,g,b"))?;
+        let [r, g, b] = values[..] else { bail!("--edit-emission '{emission}' needs three numbers") };
+        Ok(Editor { url: format!("{}/api/objects/{object}/emission", http_base(ws_url)?), token, emission: [r, g, b] })
+    }
+
+    /// Sends edit number `k` (half the emission when even, full when odd, so the first edit
+    /// changes a scene that starts at full); returns its time, µs.
+    fn send(&self, k: u64) -> anyhow::Result<u64> {
+        let factor = if k % 2 == 0 { 0.5 } else { 1.0 };
+        let body = serde_json::json!({ "emission": self.emission.map(|c| c * factor) }).to_string();
+        let at = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?.as_micros() as u64;
+        ureq::put(&self.url).header("Authorization", &format!("Bearer {}", self.token)).header("Content-Type", "application/json").send(body.as_bytes()).with_context(|| format!("PUT {}", self.url))?;
+        Ok(at)
+    }
+}
+
+async fn load(url: String, clients: usize, ramp: f64, duration: f64, json: bool, editor: Option<Editor>) -> anyhow::Result<()> {
     if clients == 0 {
         bail!("--clients must be at least 1");
     }
@@ -110,16 +151,38 @@ async fn load(url: String, clients: usize, ramp: f64, duration: f64, json: bool)
     if (limit as usize) < clients + 64 {
         eprintln!("warning: the open-file limit is {limit}; {clients} viewers may fail to connect");
     }
-    let deadline = std::time::Instant::now() + ramp + duration;
+    let (started, cpu_at_start) = (std::time::Instant::now(), client::load::process_cpu_seconds());
+    let deadline = started + ramp + duration;
     let viewers: Vec<_> = (0..clients)
         .map(|k| tokio::spawn(client::load::run_viewer(url.clone(), ramp.mul_f64(k as f64 / clients as f64), deadline)))
         .collect();
+    // Edits start once every viewer is connected and stop a second before the end.
+    let edits = match editor {
+        Some(editor) => Some(tokio::task::spawn_blocking(move || -> anyhow::Result<Vec<u64>> {
+            std::thread::sleep(ramp + Duration::from_millis(500)); // wait out the ramp: pacing, not synchronisation
+            let mut times = Vec::new();
+            for k in 0.. {
+                if std::time::Instant::now() + Duration::from_secs(1) >= deadline {
+                    break;
+                }
+                times.push(editor.send(k)?);
+                std::thread::sleep(Duration::from_secs(1)); // one edit a second
+            }
+            Ok(times)
+        })),
+        None => None,
+    };
     let mut stats = Vec::with_capacity(clients);
     for viewer in viewers {
         stats.push(viewer.await?);
     }
+    let edit_times = match edits {
+        Some(task) => task.await??,
+        None => Vec::new(),
+    };
     let metrics = tokio::task::spawn_blocking(move || client::fetch_metrics(&base)).await?.map(|t| client::load::parse_metrics(&t)).unwrap_or_default();
-    let report = client::load::summarize(stats, metrics);
+    let cpu = cpu_at_start.zip(client::load::process_cpu_seconds()).map(|(a, b)| 100.0 * (b - a) / started.elapsed().as_secs_f64());
+    let report = client::load::summarize(stats, metrics, cpu, &edit_times);
     if json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
@@ -128,6 +191,15 @@ async fn load(url: String, clients: usize, ramp: f64, duration: f64, json: bool)
         println!("connect   p50 {:.1} ms, p99 {:.1} ms; first frame p50 {:.1} ms, p99 {:.1} ms", report.connect_ms.p50, report.connect_ms.p99, report.first_frame_ms.p50, report.first_frame_ms.p99);
         println!("latency   p50 {:.1} ms, p90 {:.1} ms, p99 {:.1} ms, max {:.1} ms", l.p50, l.p90, l.p99, l.max);
         println!("traffic   {} frames, {} bytes; per viewer {}..{} frames; {} resyncs", report.frames, report.bytes, report.frames_per_viewer[0], report.frames_per_viewer[1], report.resyncs);
+        if !report.edit_to_last_viewer_ms.is_empty() {
+            let e = &report.edit_to_last_viewer_ms;
+            let mut sorted = e.clone();
+            sorted.sort_by(f64::total_cmp);
+            println!("edits     {} edits, PUT to last viewer: median {:.1} ms, max {:.1} ms", e.len(), sorted[sorted.len() / 2], sorted[sorted.len() - 1]);
+        }
+        if let Some(cpu) = report.load_tester_cpu_percent {
+            println!("tester    {cpu:.0}% CPU (of one core) in this process");
+        }
         for (name, value) in report.server.iter().filter(|(n, _)| !n.starts_with("radcast_solve")) {
             println!("server    {name} {value}");
         }

@@ -142,7 +142,7 @@ pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option
     };
     let mut session = Session::new(&prepared.scene, &prepared.mesh, &prepared.request, &progress)?;
     let report = session.solve(&progress);
-    let radiosity = to_f32(&session.radiosity);
+    let radiosity = to_f32(session.radiosity());
     hub.publish(&radiosity, true);
     let s = report.seconds;
     *shared.metrics.solve_seconds.lock().expect("metrics lock") = vec![("mesh", s.mesh), ("form_factors", s.form_factors), ("solve", s.solve), ("total", s.total)];
@@ -165,11 +165,14 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, solution: Solution) -> 
             // never pays for them.
             let Some(batch) = shared.edits.wait() else { return Ok(()) };
             let mut session = Session::new(&prepared.scene, &prepared.mesh, &prepared.request, &solver::no_progress)?;
-            session.radiosity = radiosity.iter().map(|c| Rgb::new(c[0] as f64, c[1] as f64, c[2] as f64)).collect();
+            session.adopt_solution(radiosity.iter().map(|c| Rgb::new(c[0] as f64, c[1] as f64, c[2] as f64)).collect());
             apply(&mut session, shared, batch);
             session
         }
     };
+    // The lights' responses, so that the first edit of a light is as fast as the rest.
+    let iterations = session.prepare_emitters();
+    tracing::info!(iterations, "emitter responses ready");
     while let Some(batch) = shared.edits.wait() {
         apply(&mut session, shared, batch);
     }
@@ -184,7 +187,7 @@ fn apply(session: &mut Session, shared: &Shared, batch: std::collections::BTreeM
         }
     }
     let report = session.solve(&solver::no_progress);
-    let version = shared.hub.publish(&to_f32(&session.radiosity), report.converged);
+    let version = shared.hub.publish(&to_f32(session.radiosity()), report.converged);
     tracing::info!(version, edits = batch.len(), iterations = report.iterations, ms = started.elapsed().as_secs_f64() * 1e3, "re-solved");
     if let Ok(json) = serde_json::to_value(&report) {
         *shared.report.lock().expect("report lock") = Some(json);

@@ -1,13 +1,14 @@
 //! The whole offline path, scene file to solution, with a timing per stage: what the `radcast`
 //! command and the server both run.
 
-use crate::Progress;
+use crate::{Progress, no_progress};
 use crate::form_factors::{DenseFormFactors, FormFactorSettings};
 use crate::mesh::{Mesh, PatchTarget};
 use crate::scene::{Rgb, Scene, SceneError};
 use crate::solve::{SolveOutcome, SolverSettings, System, solve};
 use crate::visibility::Occluders;
 use serde::Serialize;
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
@@ -148,10 +149,19 @@ pub fn solve_mesh(scene: &Scene, mesh: &Mesh, request: &SolveRequest, progress: 
     Ok((session.radiosity, report))
 }
 
-/// A solved scene kept live: its form factors stay, so emission changes re-solve from the
-/// current answer (a warm start, a few iterations) without recomputing any form factor.
+/// A solved scene kept live for emission changes. Radiosity is linear in emission,
+/// `B = (I - rho F)^-1 E`, so the session keeps, per edited object `k`, its response `G_k` to
+/// unit emission on its patches and `R_k` to its original emission; after edits,
+/// `B = B_base + sum_k (e_k * G_k - R_k)`: an O(n) sum per edit instead of a solve, exact to
+/// the solver tolerance. Each object costs one or two solves, once.
 pub struct Session {
     form_factors: DenseFormFactors,
+    /// The solution for the scene's own emission.
+    base: Vec<Rgb>,
+    /// Per object: (response to unit emission, response to its original emission).
+    responses: BTreeMap<u32, (Vec<Rgb>, Vec<Rgb>)>,
+    /// Current emission of every edited object.
+    edited: BTreeMap<u32, Rgb>,
     objects: Vec<String>,
     patch_objects: Vec<u32>,
     reflectance: Vec<Rgb>,
@@ -161,8 +171,7 @@ pub struct Session {
     seconds: StageSeconds,
     triangles: usize,
     skipped_faces: usize,
-    /// Radiosity per patch, W/m^2: zero until the first [`Session::solve`].
-    pub radiosity: Vec<Rgb>,
+    radiosity: Vec<Rgb>,
 }
 
 /// An emission change that cannot be applied.
@@ -201,6 +210,9 @@ impl Session {
             emission: column(|p| p.emission),
             area: mesh.patches.iter().map(|p| p.area).collect(),
             settings: request.solver,
+            base: vec![Rgb::ZERO; n],
+            responses: BTreeMap::new(),
+            edited: BTreeMap::new(),
             seconds,
             triangles: scene.triangle_count(),
             skipped_faces: scene.skipped_degenerate_faces,
@@ -208,24 +220,89 @@ impl Session {
         })
     }
 
-    /// Sets the emission of every patch of object `name`.
+    /// Radiosity per patch, W/m^2: zero until the first [`Session::solve`].
+    pub fn radiosity(&self) -> &[Rgb] {
+        &self.radiosity
+    }
+
+    /// Takes `radiosity` as the solution for the scene's own emission (a cached solve), so that
+    /// edits can be applied without solving it again.
+    pub fn adopt_solution(&mut self, radiosity: Vec<Rgb>) {
+        assert_eq!(radiosity.len(), self.base.len(), "one radiosity per patch");
+        self.base.clone_from(&radiosity);
+        self.radiosity = radiosity;
+    }
+
+    /// Sets the emission of every patch of object `name`; [`Session::solve`] applies it.
     pub fn set_emission(&mut self, name: &str, emission: Rgb) -> Result<(), EditError> {
         let object = self.objects.iter().position(|o| o == name).ok_or_else(|| EditError::UnknownObject(name.into()))? as u32;
         if !emission.is_finite() || emission.min_element() < 0.0 {
             return Err(EditError::InvalidEmission(emission.to_array()));
         }
-        for (e, _) in self.emission.iter_mut().zip(&self.patch_objects).filter(|(_, o)| **o == object) {
-            *e = emission;
-        }
+        self.edited.insert(object, emission);
         Ok(())
     }
 
-    /// Solves from the current radiosity (zero the first time) and reports.
+    /// Solves for `emission` from zero.
+    fn solve_for(&self, emission: &[Rgb], progress: &(dyn Fn(Progress) + Sync)) -> SolveOutcome {
+        let system = System { reflectance: &self.reflectance, emission, area: &self.area };
+        solve(&self.form_factors, &system, &self.settings, None, progress)
+    }
+
+    /// Computes the responses of `object` unless known; returns the solver iterations spent.
+    fn ensure_response(&mut self, object: u32) -> usize {
+        if self.responses.contains_key(&object) {
+            return 0;
+        }
+        let mask = |value: &dyn Fn(usize) -> Rgb| -> Vec<Rgb> { (0..self.emission.len()).map(|i| if self.patch_objects[i] == object { value(i) } else { Rgb::ZERO }).collect() };
+        let unit = self.solve_for(&mask(&|_| Rgb::ONE), &no_progress);
+        let original_emission = mask(&|i| self.emission[i]);
+        let mut iterations = unit.iterations;
+        // Uniform original emission needs no second solve: its response is e * G.
+        let first = original_emission.iter().zip(&self.patch_objects).find(|(_, o)| **o == object).map(|(e, _)| *e).unwrap_or(Rgb::ZERO);
+        let uniform = original_emission.iter().zip(&self.patch_objects).all(|(e, o)| *o != object || *e == first);
+        let original = if uniform {
+            unit.radiosity.iter().map(|g| *g * first).collect()
+        } else {
+            let solved = self.solve_for(&original_emission, &no_progress);
+            iterations += solved.iterations;
+            solved.radiosity
+        };
+        self.responses.insert(object, (unit.radiosity, original));
+        iterations
+    }
+
+    /// Prepares the responses of every object that emits in the scene, so that edits of the
+    /// scene's lights apply at once. Returns the solver iterations spent.
+    pub fn prepare_emitters(&mut self) -> usize {
+        let emitting: std::collections::BTreeSet<u32> = self.emission.iter().zip(&self.patch_objects).filter(|(e, _)| e.max_element() > 0.0).map(|(_, o)| *o).collect();
+        emitting.into_iter().map(|o| self.ensure_response(o)).sum()
+    }
+
+    /// Solves: the first time (or with no edits) from zero, afterwards by superposing the
+    /// responses of the edited objects on the base solution.
     pub fn solve(&mut self, progress: &(dyn Fn(Progress) + Sync)) -> SolveReport {
         let clock = Instant::now();
-        let system = System { reflectance: &self.reflectance, emission: &self.emission, area: &self.area };
-        let SolveOutcome { radiosity, iterations, residual, converged } = solve(&self.form_factors, &system, &self.settings, Some(&self.radiosity), progress);
-        self.radiosity = radiosity;
+        let (iterations, residual, converged) = if self.edited.is_empty() {
+            let outcome = self.solve_for(&self.emission, progress);
+            self.base.clone_from(&outcome.radiosity);
+            self.radiosity = outcome.radiosity;
+            (outcome.iterations, outcome.residual, outcome.converged)
+        } else {
+            let edited: Vec<(u32, Rgb)> = self.edited.iter().map(|(o, e)| (*o, *e)).collect();
+            let iterations = edited.iter().map(|(o, _)| self.ensure_response(*o)).sum();
+            let mut radiosity = self.base.clone();
+            for (object, emission) in edited {
+                let (unit, original) = &self.responses[&object];
+                for ((b, g), r) in radiosity.iter_mut().zip(unit).zip(original) {
+                    *b += *g * emission - *r;
+                }
+            }
+            // Clamp round-off below zero, as the solver does.
+            radiosity.iter_mut().for_each(|b| *b = b.max(Rgb::ZERO));
+            self.radiosity = radiosity;
+            (iterations, self.settings.tolerance, true)
+        };
         self.seconds.solve = clock.elapsed().as_secs_f64();
         self.seconds.total = self.seconds.mesh + self.seconds.form_factors + self.seconds.solve;
         let (mut area, mut power) = (vec![0.0; self.objects.len()], vec![Rgb::ZERO; self.objects.len()]);
