@@ -23,7 +23,7 @@ async fn live_cornell() -> (SocketAddr, Arc<Shared>) {
     let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let address = listener.local_addr().unwrap();
-    tokio::spawn(axum::serve(listener, routes::router(shared.clone())).into_future());
+    tokio::spawn(routes::serve(listener, shared.clone()));
     let solver_side = shared.clone();
     tokio::task::spawn_blocking(move || {
         let solution = solve_and_publish(&prepared, &solver_side, None).unwrap();

@@ -21,8 +21,7 @@ const PATIENCE: Duration = Duration::from_secs(60);
 async fn serve(shared: Arc<Shared>) -> SocketAddr {
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind an ephemeral port");
     let address = listener.local_addr().unwrap();
-    let stop = shared.shutdown.clone();
-    tokio::spawn(async move { axum::serve(listener, routes::router(shared)).with_graceful_shutdown(async move { stop.cancelled().await }).await });
+    tokio::spawn(routes::serve(listener, shared));
     address
 }
 
@@ -55,6 +54,7 @@ async fn synthetic_server(patches: u32, limits: Limits) -> (SocketAddr, Arc<Shar
         report: Default::default(),
         edits: Default::default(),
         token: TOKEN.into(),
+        viewers_per_ip: Default::default(),
     });
     (serve(shared.clone()).await, shared)
 }
@@ -243,7 +243,27 @@ async fn viewers_past_the_limit_are_refused_cleanly() {
     assert!(refused.to_string().contains("503"), "{refused}");
     assert_eq!(shared.metrics.refused.load(Ordering::Relaxed), 1);
     let text = shared.metrics.render(10, 1, false);
-    assert!(text.contains("radcast_viewers 2\n") && text.contains("radcast_viewers_refused_total 1\n"), "{text}");
+    assert!(text.contains("radcast_viewers 2\n") && text.contains("radcast_viewers_refused_total{limit=\"server\"} 1\n"), "{text}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn one_address_past_its_limit_is_refused_and_its_slots_come_back() {
+    let (address, shared) = synthetic_server(10, Limits { max_viewers_per_ip: 2, ..Limits::default() }).await;
+    let a = connect(address).await;
+    let _b = connect(address).await;
+    let refused = tokio_tungstenite::connect_async(format!("ws://{address}/ws")).await.expect_err("third from one address");
+    assert!(refused.to_string().contains("429"), "{refused}");
+    assert_eq!(shared.metrics.refused_per_ip.load(Ordering::Relaxed), 1);
+    // When one leaves, its place is free again.
+    drop(a);
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    loop {
+        match tokio_tungstenite::connect_async(format!("ws://{address}/ws")).await {
+            Ok(_) => break,
+            Err(_) => assert!(tokio::time::Instant::now() < deadline, "the slot never came back"),
+        }
+        tokio::task::yield_now().await;
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

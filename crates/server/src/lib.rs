@@ -18,6 +18,8 @@ use tokio_util::sync::CancellationToken;
 pub struct Limits {
     /// Viewers at once; more are refused with 503.
     pub max_viewers: usize,
+    /// Viewers at once from one IP address; more are refused with 429.
+    pub max_viewers_per_ip: usize,
     /// Largest message a viewer may send, bytes.
     pub max_message_bytes: usize,
     /// A send that takes longer drops the viewer (it stopped reading).
@@ -32,6 +34,7 @@ impl Default for Limits {
     fn default() -> Self {
         Limits {
             max_viewers: 20_000,
+            max_viewers_per_ip: 20_000,
             max_message_bytes: 1024,
             send_timeout: Duration::from_secs(10),
             ping_interval: Duration::from_secs(15),
@@ -56,4 +59,6 @@ pub struct Shared {
     pub edits: edits::Edits,
     /// The bearer token the control API requires.
     pub token: String,
+    /// Viewers connected now, per IP address.
+    pub viewers_per_ip: std::sync::Mutex<std::collections::HashMap<std::net::IpAddr, usize>>,
 }

@@ -36,6 +36,9 @@ struct Args {
     /// Most viewers at once; more get 503.
     #[arg(long, env = "RADCAST_MAX_VIEWERS", default_value_t = Limits::default().max_viewers)]
     max_viewers: usize,
+    /// Most viewers at once from one IP address; more get 429.
+    #[arg(long, env = "RADCAST_MAX_VIEWERS_PER_IP", default_value_t = Limits::default().max_viewers_per_ip)]
+    max_viewers_per_ip: usize,
     /// Seconds a send may take before a viewer is dropped as stalled.
     #[arg(long, default_value_t = Limits::default().send_timeout.as_secs_f64())]
     send_timeout: f64,
@@ -77,6 +80,7 @@ async fn main() -> anyhow::Result<()> {
     };
     let limits = Limits {
         max_viewers: args.max_viewers,
+        max_viewers_per_ip: args.max_viewers_per_ip,
         send_timeout: seconds(args.send_timeout, "send-timeout")?,
         idle_timeout: seconds(args.idle_timeout, "idle-timeout")?,
         ..Limits::default()
@@ -115,9 +119,8 @@ async fn main() -> anyhow::Result<()> {
         tracing::info!("shutting down: closing viewers");
         shutdown.cancel();
     });
-    let stopped = shared.shutdown.clone();
     let edits_done = shared.clone();
-    axum::serve(listener, routes::router(shared)).with_graceful_shutdown(async move { stopped.cancelled().await }).await?;
+    routes::serve(listener, shared).await?;
     edits_done.edits.close();
     solving.abort();
     Ok(())

@@ -34,6 +34,8 @@ pub struct Metrics {
     pub viewers: AtomicU64,
     /// Viewers refused because the connection limit was reached.
     pub refused: AtomicU64,
+    /// Viewers refused because their address reached its limit.
+    pub refused_per_ip: AtomicU64,
     /// Frames (full and delta) sent.
     pub frames_sent: AtomicU64,
     /// Bytes of frames sent.
@@ -76,7 +78,8 @@ impl Metrics {
         let plain = |v: u64| vec![(String::new(), v as f64)];
         let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
         metric("radcast_viewers", "gauge", "Viewers connected now.", &plain(get(&self.viewers)));
-        metric("radcast_viewers_refused_total", "counter", "Connections refused at the viewer limit.", &plain(get(&self.refused)));
+        let refused = vec![("{limit=\"server\"}".to_string(), get(&self.refused) as f64), ("{limit=\"per_ip\"}".to_string(), get(&self.refused_per_ip) as f64)];
+        metric("radcast_viewers_refused_total", "counter", "Connections refused at a viewer limit.", &refused);
         let dropped: Vec<_> = DropReason::ALL.iter().map(|r| (format!("{{reason=\"{}\"}}", r.label()), self.dropped_count(*r) as f64)).collect();
         metric("radcast_viewers_dropped_total", "counter", "Viewers disconnected by the server, by reason.", &dropped);
         metric("radcast_frames_sent_total", "counter", "Frames sent to viewers.", &plain(get(&self.frames_sent)));

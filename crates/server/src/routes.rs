@@ -1,7 +1,9 @@
 //! HTTP routes; each handler is a thin wrapper over plain data in [`Shared`].
 
 use crate::Shared;
-use crate::viewer::{serve_viewer, try_admit};
+use crate::viewer::{Refusal, serve_viewer, try_admit};
+use axum::extract::ConnectInfo;
+use std::net::SocketAddr;
 use axum::Router;
 use axum::extract::State;
 use axum::extract::ws::WebSocketUpgrade;
@@ -44,6 +46,13 @@ async fn scene_glb(State(shared): State<Arc<Shared>>) -> Response {
         Ok(bytes) => ([(header::CONTENT_TYPE, "model/gltf-binary")], bytes).into_response(),
         Err(_) => (StatusCode::INTERNAL_SERVER_ERROR, "glTF export failed\n").into_response(),
     }
+}
+
+/// Serves the router on `listener` until `shared.shutdown` is cancelled (viewers need their
+/// peer address for the per-IP limit).
+pub async fn serve(listener: tokio::net::TcpListener, shared: Arc<Shared>) -> std::io::Result<()> {
+    let stop = shared.shutdown.clone();
+    axum::serve(listener, router(shared).into_make_service_with_connect_info::<SocketAddr>()).with_graceful_shutdown(async move { stop.cancelled().await }).await
 }
 
 /// The body of `GET /api/solution`.
@@ -89,9 +98,11 @@ async fn metrics(State(shared): State<Arc<Shared>>) -> Response {
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
 }
 
-async fn websocket(State(shared): State<Arc<Shared>>, upgrade: WebSocketUpgrade) -> Response {
-    let Some(slot) = try_admit(&shared) else {
-        return (StatusCode::SERVICE_UNAVAILABLE, "radcast-server: viewer limit reached\n").into_response();
+async fn websocket(State(shared): State<Arc<Shared>>, ConnectInfo(peer): ConnectInfo<SocketAddr>, upgrade: WebSocketUpgrade) -> Response {
+    let slot = match try_admit(&shared, peer.ip()) {
+        Ok(slot) => slot,
+        Err(Refusal::ServerFull) => return (StatusCode::SERVICE_UNAVAILABLE, "radcast-server: viewer limit reached\n").into_response(),
+        Err(Refusal::AddressFull) => return (StatusCode::TOO_MANY_REQUESTS, format!("radcast-server: too many viewers from {}\n", peer.ip())).into_response(),
     };
     let limits = shared.limits;
     // Viewers send only tiny control messages and every frame is flushed as it is sent, so

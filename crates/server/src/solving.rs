@@ -204,6 +204,7 @@ pub fn shared_for(prepared: &Prepared, limits: crate::Limits, token: String) -> 
         report: Mutex::new(None),
         edits: Default::default(),
         token,
+        viewers_per_ip: Default::default(),
     })
 }
 

@@ -6,32 +6,60 @@ use crate::Shared;
 use axum::extract::ws::{CloseFrame, Message, WebSocket, close_code};
 use bytes::Bytes;
 use futures_util::{SinkExt, StreamExt};
+use std::net::IpAddr;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use tokio::time::{Instant, interval, timeout};
 use wire::ClientMessage;
 
-/// A claimed place under the viewer limit; released however the connection ends, including
+/// A claimed place under the viewer limits; released however the connection ends, including
 /// an upgrade that never completes.
-pub struct ViewerSlot(Arc<Shared>);
+pub struct ViewerSlot(Arc<Shared>, IpAddr);
 
 impl Drop for ViewerSlot {
     fn drop(&mut self) {
         self.0.metrics.viewers.fetch_sub(1, Ordering::Relaxed);
+        let mut per_ip = self.0.viewers_per_ip.lock().expect("per-IP lock");
+        if let Some(count) = per_ip.get_mut(&self.1) {
+            *count -= 1;
+            if *count == 0 {
+                per_ip.remove(&self.1);
+            }
+        }
     }
 }
 
-/// Claims a viewer slot, or `None` at the limit (counted as refused).
-pub fn try_admit(shared: &Arc<Shared>) -> Option<ViewerSlot> {
+/// Why a viewer was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Refusal {
+    /// The server holds its maximum number of viewers.
+    ServerFull,
+    /// That address holds its maximum number of viewers.
+    AddressFull,
+}
+
+/// Claims a viewer slot for a viewer from `ip`, or says which limit refused it (counted).
+pub fn try_admit(shared: &Arc<Shared>, ip: IpAddr) -> Result<ViewerSlot, Refusal> {
     let metrics: &Metrics = &shared.metrics;
-    let limit = shared.limits.max_viewers as u64;
-    match metrics.viewers.fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| (n < limit).then_some(n + 1)) {
-        Ok(_) => Some(ViewerSlot(shared.clone())),
-        Err(_) => {
-            metrics.refused.fetch_add(1, Ordering::Relaxed);
-            None
+    let mut per_ip = shared.viewers_per_ip.lock().expect("per-IP lock");
+    let from_ip = per_ip.entry(ip).or_insert(0);
+    if *from_ip >= shared.limits.max_viewers_per_ip {
+        metrics.refused_per_ip.fetch_add(1, Ordering::Relaxed);
+        if *from_ip == 0 {
+            per_ip.remove(&ip);
         }
+        return Err(Refusal::AddressFull);
     }
+    let limit = shared.limits.max_viewers as u64;
+    if metrics.viewers.fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| (n < limit).then_some(n + 1)).is_err() {
+        metrics.refused.fetch_add(1, Ordering::Relaxed);
+        if *from_ip == 0 {
+            per_ip.remove(&ip);
+        }
+        return Err(Refusal::ServerFull);
+    }
+    *from_ip += 1;
+    Ok(ViewerSlot(shared.clone(), ip))
 }
 
 /// Why a read failed: `Some(reason)` when the viewer broke the protocol (an oversized or
