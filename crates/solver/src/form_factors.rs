@@ -12,6 +12,7 @@ use crate::mesh::{Mesh, Patch};
 use crate::scene::Rgb;
 use crate::visibility::Occluders;
 use rayon::prelude::*;
+use glam::DVec3;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
 /// How light moves between patches: what every solver needs from form factors. A dense matrix
@@ -168,18 +169,78 @@ fn mirror_upper_triangle(m: &mut [u8], n: usize) {
 }
 
 /// All `n^2` form factors in one row-major f32 matrix: the baseline, exact up to quadrature and
-/// ray sampling, and quadratic in time and memory.
+/// ray sampling, and quadratic in time and memory. The clear-ray counts stay beside it, so a
+/// moved object costs only the pairs it can affect ([`DenseFormFactors::update_moved`]).
 pub struct DenseFormFactors {
     n: usize,
     values: Vec<f32>,
+    /// Clear shadow rays per pair (both triangles filled), or [`NOT_FACING`].
+    clear: Vec<u8>,
+    /// Per row, the factor its integrated values were multiplied by (1, or 1/sum for a
+    /// closed view), so single entries can be updated without integrating the row again.
+    row_scale: Vec<f64>,
+    settings: FormFactorSettings,
     /// Shadow rays cast while computing.
     pub rays_cast: u64,
 }
 
+/// What an incremental update recomputed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct UpdateStats {
+    /// Patch pairs whose visibility was recomputed.
+    pub pairs: usize,
+    /// Rows (receivers) with at least one changed entry.
+    pub rows: usize,
+    /// Form-factor entries integrated again (of n^2).
+    pub entries: usize,
+}
+
+/// Clear-ray count of pair `(i, j)`, or [`NOT_FACING`]; and the rays cast.
+fn pair_visibility(patches: &[Patch], i: usize, j: usize, occluders: &Occluders, settings: &FormFactorSettings) -> (u8, u64) {
+    let (p, q) = (&patches[i], &patches[j]);
+    if !mutually_facing(p, q) {
+        return (NOT_FACING, 0);
+    }
+    let rays = rays_for_pair(p, q, settings);
+    (clear_rays(p, q, (i, j), rays, occluders) as u8, rays as u64)
+}
+
+/// One entry before normalisation: the receiver-integrated analytic factor times the clear
+/// fraction of shadow rays.
+fn raw_entry(patches: &[Patch], i: usize, j: usize, clear: u8, settings: &FormFactorSettings) -> f64 {
+    if clear == NOT_FACING || clear == 0 || i == j {
+        return 0.0;
+    }
+    let (p, q) = (&patches[i], &patches[j]);
+    let level = near_pair_level(p, q).unwrap_or(0);
+    unoccluded_form_factor(p, q, level) * clear as f64 / rays_for_pair(p, q, settings) as f64
+}
+
+/// Writes `raw` into `row` normalised: a receiver whose view is closed (all its hemisphere
+/// rays meet a front face) sends all its light to patches, so its row sums to one; closed
+/// enclosures stay exact for bright surfaces (rho -> 1) and with occluders, whatever the
+/// sampling noise of visibility. Returns the factor applied.
+fn normalise_row(patches: &[Patch], i: usize, raw: impl Iterator<Item = f64>, occluders: &Occluders, row: &mut [f32]) -> f64 {
+    let mut sum = 0.0;
+    for (value, r) in row.iter_mut().zip(raw) {
+        *value = r as f32;
+        sum += r;
+    }
+    let scale = if sum > 0.0 && sees_closed_view(&patches[i], i, occluders) { 1.0 / sum } else { 1.0 };
+    if scale != 1.0 {
+        row.iter_mut().for_each(|value| *value = (*value as f64 * scale) as f32);
+    }
+    scale
+}
+
+fn bounds(points: &[DVec3]) -> (DVec3, DVec3) {
+    points.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+}
+
 impl DenseFormFactors {
-    /// Bytes the matrix for `n` patches needs (plus `n^2` bytes of scratch while computing).
+    /// Bytes the form factors and clear-ray counts for `n` patches need.
     pub fn memory_bytes(n: usize) -> u64 {
-        (n as u64).pow(2) * std::mem::size_of::<f32>() as u64
+        (n as u64).pow(2) * (std::mem::size_of::<f32>() + 1) as u64
     }
 
     /// Computes every form factor of `mesh`, reporting rows done through `progress`.
@@ -193,53 +254,93 @@ impl DenseFormFactors {
                 progress(Progress::FormFactors { done, total: 2 * n });
             }
         };
-
-        // Pass 1: visibility is symmetric, so rays are cast once per unordered pair (i < j) and
-        // stored as counts of clear rays, then mirrored so pass 2 reads rows sequentially.
+        // Pass 1: visibility is symmetric, so rays are cast once per unordered pair (i < j),
+        // then mirrored so pass 2 reads rows sequentially.
         let rays_cast = AtomicU64::new(0);
         let mut clear = vec![NOT_FACING; n * n];
         clear.par_chunks_mut(n.max(1)).enumerate().for_each(|(i, row)| {
-            let mut cast = 0u64;
-            for j in i + 1..n {
-                let (p, q) = (&patches[i], &patches[j]);
-                if mutually_facing(p, q) {
-                    let rays = rays_for_pair(p, q, settings);
-                    row[j] = clear_rays(p, q, (i, j), rays, occluders) as u8;
-                    cast += rays as u64;
-                }
-            }
+            let cast: u64 = (i + 1..n).map(|j| {
+                let (count, rays) = pair_visibility(patches, i, j, occluders, settings);
+                row[j] = count;
+                rays
+            }).sum();
             rays_cast.fetch_add(cast, Ordering::Relaxed);
             report();
         });
         mirror_upper_triangle(&mut clear, n);
-
-        // Pass 2: row i integrates its receiver's view: far sources at the centroid, near ones
-        // with their own finer rule. A receiver whose view is closed (all its hemisphere rays
-        // meet a front face) sends all its light to patches, so its row is normalised to one:
-        // closed enclosures stay exact for bright surfaces (rho -> 1) and with occluders,
-        // whatever the sampling noise of visibility.
+        // Pass 2: each row integrates its receiver's view, far sources at the centroid, near
+        // ones with their own finer rule.
         let mut values = vec![0f32; n * n];
-        values.par_chunks_mut(n.max(1)).enumerate().for_each(|(i, row)| {
-            let p = &patches[i];
+        let mut row_scale = vec![1.0; n];
+        values.par_chunks_mut(n.max(1)).zip(row_scale.par_iter_mut()).enumerate().for_each(|(i, (row, scale))| {
             let clear_row = &clear[i * n..(i + 1) * n];
-            let mut sum = 0.0;
-            for (j, value) in row.iter_mut().enumerate() {
-                if clear_row[j] == NOT_FACING || clear_row[j] == 0 || i == j {
-                    continue;
-                }
-                let q = &patches[j];
-                let level = near_pair_level(p, q).unwrap_or(0);
-                let visible = clear_row[j] as f64 / rays_for_pair(p, q, settings) as f64;
-                let factor = unoccluded_form_factor(p, q, level) * visible;
-                *value = factor as f32;
-                sum += factor;
-            }
-            if sum > 0.0 && sees_closed_view(p, i, occluders) {
-                row.iter_mut().for_each(|value| *value = (*value as f64 / sum) as f32);
-            }
+            *scale = normalise_row(patches, i, (0..n).map(|j| raw_entry(patches, i, j, clear_row[j], settings)), occluders, row);
             report();
         });
-        DenseFormFactors { n, values, rays_cast: rays_cast.into_inner() }
+        DenseFormFactors { n, values, clear, row_scale, settings: *settings, rays_cast: rays_cast.into_inner() }
+    }
+
+    /// Updates after the patches marked in `moved` changed place (`mesh` and `occluders` are
+    /// already the new ones; `region` bounds the moved object before and after). A pair is
+    /// recomputed when it involves a moved patch or when its bounding box meets `region`:
+    /// every segment between two patches lies in their box, so no other pair's visibility can
+    /// change. Rows with a changed pair are recomputed whole.
+    pub fn update_moved(&mut self, mesh: &Mesh, occluders: &Occluders, moved: &[bool], region: (DVec3, DVec3)) -> UpdateStats {
+        let (patches, n, settings) = (&mesh.patches, self.n, self.settings);
+        let boxes: Vec<(DVec3, DVec3)> = patches.iter().map(|p| bounds(p.polygon.corners())).collect();
+        let overlaps = |(lo, hi): (DVec3, DVec3)| lo.cmple(region.1).all() && hi.cmpge(region.0).all();
+        let pairs = AtomicUsize::new(0);
+        // Pass A: the pairs that can have changed, upper triangle; each row lists its changes.
+        let changed_upper: Vec<Vec<u32>> = self
+            .clear
+            .par_chunks_mut(n.max(1))
+            .enumerate()
+            .map(|(i, row)| {
+                let mut changed = Vec::new();
+                for j in i + 1..n {
+                    let pair_box = (boxes[i].0.min(boxes[j].0), boxes[i].1.max(boxes[j].1));
+                    if !(moved[i] || moved[j] || overlaps(pair_box)) {
+                        continue;
+                    }
+                    pairs.fetch_add(1, Ordering::Relaxed);
+                    let (count, _) = pair_visibility(patches, i, j, occluders, &settings);
+                    if count != row[j] || moved[i] || moved[j] {
+                        row[j] = count;
+                        changed.push(j as u32);
+                    }
+                }
+                changed
+            })
+            .collect();
+        mirror_upper_triangle(&mut self.clear, n);
+        let mut changed: Vec<Vec<u32>> = vec![Vec::new(); n];
+        for (i, columns) in changed_upper.iter().enumerate() {
+            for &j in columns {
+                changed[i].push(j);
+                changed[j as usize].push(i as u32);
+            }
+        }
+        // Pass B: integrate only the changed entries of each row again; a moved receiver's
+        // whole row, since its own quadrature moved. Then normalise anew.
+        let clear = &self.clear;
+        let entries = AtomicUsize::new(0);
+        self.values.par_chunks_mut(n.max(1)).zip(self.row_scale.par_iter_mut()).enumerate().filter(|(i, _)| !changed[*i].is_empty()).for_each(|(i, (row, scale))| {
+            let clear_row = &clear[i * n..(i + 1) * n];
+            let mut raw: Vec<f64> = if moved[i] {
+                entries.fetch_add(n, Ordering::Relaxed);
+                (0..n).map(|j| raw_entry(patches, i, j, clear_row[j], &settings)).collect()
+            } else {
+                entries.fetch_add(changed[i].len(), Ordering::Relaxed);
+                row.iter().map(|v| *v as f64 / *scale).collect()
+            };
+            if !moved[i] {
+                for &j in &changed[i] {
+                    raw[j as usize] = raw_entry(patches, i, j as usize, clear_row[j as usize], &settings);
+                }
+            }
+            *scale = normalise_row(patches, i, raw.into_iter(), occluders, row);
+        });
+        UpdateStats { pairs: pairs.into_inner(), rows: changed.iter().filter(|c| !c.is_empty()).count(), entries: entries.into_inner() }
     }
 
     /// `F_ij`.

@@ -27,6 +27,11 @@ impl Polygon {
         Polygon { corners: [a, b, c, d], arity: 4 }
     }
 
+    /// The same polygon moved by `offset`.
+    pub fn translated(&self, offset: DVec3) -> Polygon {
+        Polygon { corners: self.corners.map(|c| c + offset), arity: self.arity }
+    }
+
     /// The corners, three or four.
     pub fn corners(&self) -> &[DVec3] {
         &self.corners[..self.arity as usize]

@@ -115,6 +115,20 @@ impl Mesh {
         if miss(fine) < miss(coarse) { fine } else { coarse }
     }
 
+    /// Moves every patch of `object` (and the corners they use) by `offset`.
+    pub fn translate_object(&mut self, object: u32, offset: DVec3) {
+        let mut moved = vec![false; self.positions.len()];
+        for patch in self.patches.iter_mut().filter(|p| p.object == object) {
+            patch.polygon = patch.polygon.translated(offset);
+            patch.centroid += offset;
+            for &c in &patch.corners[..patch.polygon.corners().len()] {
+                if !std::mem::replace(&mut moved[c as usize], true) {
+                    self.positions[c as usize] += offset;
+                }
+            }
+        }
+    }
+
     fn push_patch(&mut self, polygon: Polygon, corners: [u32; 4]) {
         self.patches.push(Patch {
             polygon,

@@ -8,6 +8,7 @@ use crate::scene::{Rgb, Scene, SceneError};
 use crate::solve::{SolveOutcome, SolverSettings, System, solve};
 use crate::visibility::Occluders;
 use serde::Serialize;
+use glam::DVec3;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
@@ -155,6 +156,8 @@ pub fn solve_mesh(scene: &Scene, mesh: &Mesh, request: &SolveRequest, progress: 
 /// `B = B_base + sum_k (e_k * G_k - R_k)`: an O(n) sum per edit instead of a solve, exact to
 /// the solver tolerance. Each object costs one or two solves, once.
 pub struct Session {
+    scene: Scene,
+    mesh: Mesh,
     form_factors: DenseFormFactors,
     /// The solution for the scene's own emission.
     base: Vec<Rgb>,
@@ -183,6 +186,22 @@ pub enum EditError {
     /// Emission must be finite and non-negative.
     #[error("emission {0:?} must have every channel finite and >= 0")]
     InvalidEmission([f64; 3]),
+    /// A translation must be finite.
+    #[error("translation {0:?} must be finite")]
+    InvalidTranslation([f64; 3]),
+}
+
+/// What moving an object cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct MoveReport {
+    /// Patch pairs whose visibility was recomputed (of n(n-1)/2).
+    pub pairs: usize,
+    /// Rows with a changed entry (of n).
+    pub rows: usize,
+    /// Form-factor entries integrated again (of n^2).
+    pub entries: usize,
+    /// Seconds for the form-factor update.
+    pub seconds: f64,
 }
 
 impl Session {
@@ -203,6 +222,8 @@ impl Session {
         seconds.form_factors = clock.elapsed().as_secs_f64();
         let column = |f: fn(&crate::mesh::Patch) -> Rgb| mesh.patches.iter().map(f).collect::<Vec<_>>();
         Ok(Session {
+            scene: scene.clone(),
+            mesh: mesh.clone(),
             form_factors,
             objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
             patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
@@ -220,6 +241,48 @@ impl Session {
         })
     }
 
+    /// The scene as it is now (after moves).
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The patches as they are now (after moves).
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
+    }
+
+    fn object_index(&self, name: &str) -> Result<u32, EditError> {
+        self.objects.iter().position(|o| o == name).map(|i| i as u32).ok_or_else(|| EditError::UnknownObject(name.into()))
+    }
+
+    /// Moves object `name` by `offset`, recomputing only the form factors it can affect. The
+    /// next [`Session::solve`] solves the moved scene in full (with the current emission).
+    pub fn translate(&mut self, name: &str, offset: DVec3) -> Result<MoveReport, EditError> {
+        let object = self.object_index(name)?;
+        if !offset.is_finite() {
+            return Err(EditError::InvalidTranslation(offset.to_array()));
+        }
+        let clock = Instant::now();
+        let corners = |scene: &Scene| scene.faces.iter().filter(|f| f.object == object).flat_map(|f| f.polygon.corners().to_vec()).collect::<Vec<_>>();
+        let mut swept = corners(&self.scene);
+        self.scene.translate_object(object, offset);
+        swept.extend(corners(&self.scene));
+        self.mesh.translate_object(object, offset);
+        let region = swept.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        let moved: Vec<bool> = self.patch_objects.iter().map(|o| *o == object).collect();
+        let occluders = Occluders::new(&self.scene);
+        let stats = self.form_factors.update_moved(&self.mesh, &occluders, &moved, region);
+        // The responses were for the old form factors: fold the edits into the emission and
+        // let the next solve start over from it.
+        for (object, emission) in std::mem::take(&mut self.edited) {
+            for (e, _) in self.emission.iter_mut().zip(&self.patch_objects).filter(|(_, o)| **o == object) {
+                *e = emission;
+            }
+        }
+        self.responses.clear();
+        Ok(MoveReport { pairs: stats.pairs, rows: stats.rows, entries: stats.entries, seconds: clock.elapsed().as_secs_f64() })
+    }
+
     /// Radiosity per patch, W/m^2: zero until the first [`Session::solve`].
     pub fn radiosity(&self) -> &[Rgb] {
         &self.radiosity
@@ -235,7 +298,7 @@ impl Session {
 
     /// Sets the emission of every patch of object `name`; [`Session::solve`] applies it.
     pub fn set_emission(&mut self, name: &str, emission: Rgb) -> Result<(), EditError> {
-        let object = self.objects.iter().position(|o| o == name).ok_or_else(|| EditError::UnknownObject(name.into()))? as u32;
+        let object = self.object_index(name)?;
         if !emission.is_finite() || emission.min_element() < 0.0 {
             return Err(EditError::InvalidEmission(emission.to_array()));
         }
@@ -284,7 +347,9 @@ impl Session {
     pub fn solve(&mut self, progress: &(dyn Fn(Progress) + Sync)) -> SolveReport {
         let clock = Instant::now();
         let (iterations, residual, converged) = if self.edited.is_empty() {
-            let outcome = self.solve_for(&self.emission, progress);
+            // From the current answer: after a move, most of it still holds.
+            let system = System { reflectance: &self.reflectance, emission: &self.emission, area: &self.area };
+            let outcome = solve(&self.form_factors, &system, &self.settings, Some(&self.radiosity), progress);
             self.base.clone_from(&outcome.radiosity);
             self.radiosity = outcome.radiosity;
             (outcome.iterations, outcome.residual, outcome.converged)

@@ -218,6 +218,13 @@ impl Scene {
         scaled
     }
 
+    /// Moves every face of `object` by `offset`.
+    pub fn translate_object(&mut self, object: u32, offset: DVec3) {
+        for face in self.faces.iter_mut().filter(|f| f.object == object) {
+            face.polygon = face.polygon.translated(offset);
+        }
+    }
+
     /// Loads an OBJ file and the MTL libraries it names (relative to the OBJ's folder).
     pub fn load_obj(path: &Path) -> Result<Scene, SceneError> {
         let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
