@@ -18,7 +18,17 @@ fn request() -> SolveRequest {
     SolveRequest { patches: PatchTarget::Count(300), ..SolveRequest::default() }
 }
 
-async fn live_cornell() -> (SocketAddr, Arc<Shared>) {
+/// Ends the server's edit loop when a test ends, passing or failing: the loop runs on a
+/// blocking thread, which the runtime would otherwise wait for forever.
+struct EditLoop(Arc<Shared>);
+
+impl Drop for EditLoop {
+    fn drop(&mut self) {
+        self.0.edits.close();
+    }
+}
+
+async fn live_cornell() -> (SocketAddr, Arc<Shared>, EditLoop) {
     let prepared = prepare("scenes/cornell-box.obj".as_ref(), request()).unwrap();
     let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
@@ -29,7 +39,8 @@ async fn live_cornell() -> (SocketAddr, Arc<Shared>) {
         let solution = solve_and_publish(&prepared, &solver_side, None).unwrap();
         serve_edits(&prepared, &solver_side, solution).unwrap();
     });
-    (address, shared)
+    let edit_loop = EditLoop(shared.clone());
+    (address, shared, edit_loop)
 }
 
 /// PUT with an optional bearer token; returns the status and the body.
@@ -53,12 +64,13 @@ struct Viewer {
     socket: tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>,
     buffer: PatchBuffer,
     deltas: Vec<usize>,
+    geometry_versions: Vec<u64>,
 }
 
 impl Viewer {
     async fn connect(address: SocketAddr) -> Viewer {
         let (socket, _) = tokio_tungstenite::connect_async(format!("ws://{address}/ws")).await.unwrap();
-        Viewer { socket, buffer: PatchBuffer::default(), deltas: Vec::new() }
+        Viewer { socket, buffer: PatchBuffer::default(), deltas: Vec::new(), geometry_versions: Vec::new() }
     }
 
     async fn wait_for(&mut self, done: impl Fn(&PatchBuffer) -> bool) {
@@ -66,8 +78,11 @@ impl Viewer {
             while !(self.buffer.info.is_some_and(|i| i.is_final) && done(&self.buffer)) {
                 let Some(Ok(Message::Binary(bytes))) = self.socket.next().await else { continue };
                 let message = ServerMessage::decode(&bytes).unwrap();
-                if let ServerMessage::Delta(delta) = &message {
+                    if let ServerMessage::Delta(delta) = &message {
                     self.deltas.push(delta.indices.len());
+                }
+                if let ServerMessage::GeometryChanged { geometry_version } = message {
+                    self.geometry_versions.push(geometry_version);
                 }
                 self.buffer.apply(&message).expect("deltas apply to what the viewer holds");
             }
@@ -103,7 +118,7 @@ fn mismatch(buffer: &PatchBuffer, expected: &[[f32; 3]]) -> Option<([f32; 3], [f
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_emission_change_reaches_every_viewer_as_a_delta_equal_to_a_fresh_solve() {
-    let (address, shared) = live_cornell().await;
+    let (address, _, _edit_loop) = live_cornell().await;
     let mut viewers = vec![Viewer::connect(address).await, Viewer::connect(address).await];
     for v in &mut viewers {
         v.wait_for(|_| true).await;
@@ -118,12 +133,11 @@ async fn an_emission_change_reaches_every_viewer_as_a_delta_equal_to_a_fresh_sol
         assert!(v.deltas.iter().all(|&changed| changed <= 300), "deltas carry only changed patches");
     }
     assert_eq!(viewers[0].buffer.colours, viewers[1].buffer.colours);
-    shared.edits.close();
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_requests_are_refused_with_a_reason_and_change_nothing() {
-    let (address, shared) = live_cornell().await;
+    let (address, shared, _edit_loop) = live_cornell().await;
     let mut viewer = Viewer::connect(address).await;
     viewer.wait_for(|_| true).await;
     let version = viewer.version();
@@ -131,7 +145,11 @@ async fn bad_requests_are_refused_with_a_reason_and_change_nothing() {
         ("/api/objects/light/emission", None, r#"{"emission": [1, 1, 1]}"#, 401, "missing or wrong bearer token"),
         ("/api/objects/light/emission", Some("wrong"), r#"{"emission": [1, 1, 1]}"#, 401, "missing or wrong bearer token"),
         ("/api/objects/lamp/emission", Some(TOKEN), r#"{"emission": [1, 1, 1]}"#, 404, "no object named 'lamp'"),
-        ("/api/objects/light/emission", Some(TOKEN), r#"{"emission": [1, -1, 1]}"#, 400, "must have every channel finite and >= 0"),
+        ("/api/objects/light/emission", Some(TOKEN), r#"{"emission": [1, -1, 1]}"#, 400, "emission [1.0, -1.0, 1.0] must have every value finite and >= 0"),
+        ("/api/objects/short_block/transform", None, r#"{"translate": [1, 0, 0]}"#, 401, "missing or wrong bearer token"),
+        ("/api/objects/sofa/transform", Some(TOKEN), r#"{"translate": [1, 0, 0]}"#, 404, "no object named 'sofa'"),
+        ("/api/objects/short_block/transform", Some(TOKEN), r#"{"translate": [1e999, 0, 0]}"#, 400, "body must be JSON like"),
+        ("/api/objects/short_block/transform", Some(TOKEN), r#"{"rotate": [1, 0, 0]}"#, 400, "translate"),
         ("/api/objects/light/emission", Some(TOKEN), r#"{"emission": [NaN, 1, 1]}"#, 400, "body must be JSON like"),
         ("/api/objects/light/emission", Some(TOKEN), r#"{"emission": [1, 1]}"#, 400, "body must be JSON like"),
         ("/api/objects/light/emission", Some(TOKEN), r#"{"emision": [1, 1, 1]}"#, 400, "body must be JSON like"),
@@ -144,12 +162,11 @@ async fn bad_requests_are_refused_with_a_reason_and_change_nothing() {
     // Every refusal came back before anything was queued: no edit is pending or was published.
     assert_eq!(shared.edits.pending(), 0);
     assert_eq!(shared.hub.current().version, version);
-    shared.edits.close();
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn rapid_changes_coalesce_and_the_newest_wins() {
-    let (address, shared) = live_cornell().await;
+    let (address, _, _edit_loop) = live_cornell().await;
     let mut viewer = Viewer::connect(address).await;
     viewer.wait_for(|_| true).await;
     let before = viewer.version();
@@ -160,7 +177,6 @@ async fn rapid_changes_coalesce_and_the_newest_wins() {
     let expected = from_scratch([30.0; 3]);
     viewer.wait_for(|b| mismatch(b, &expected).is_none()).await;
     assert!(viewer.version() - before <= 30, "at most one version per edit: {}", viewer.version() - before);
-    shared.edits.close();
 }
 
 #[test]
@@ -209,4 +225,35 @@ fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation
     // Unknown objects and non-finite offsets are refused.
     assert_eq!(session.translate("sofa", offset), Err(solver::EditError::UnknownObject("sofa".into())));
     assert!(session.translate("short_block", glam::dvec3(f64::NAN, 0.0, 0.0)).is_err());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn moving_an_object_sends_new_geometry_and_colours_of_the_moved_scene() {
+    let (address, _, _edit_loop) = live_cornell().await;
+    let mut viewer = Viewer::connect(address).await;
+    viewer.wait_for(|_| true).await;
+    let before_version = viewer.version();
+    let fetch = move || tokio::task::spawn_blocking(move || client::fetch_geometry(&format!("http://{address}")).unwrap());
+    let before = fetch().await.unwrap();
+    let (status, body) = put(address, "/api/objects/short_block/transform", Some(TOKEN), r#"{"translate": [40, 0, -30]}"#).await;
+    assert_eq!(status, 202, "{body}");
+    viewer.wait_for(|b| b.info.unwrap().solution_version > before_version).await;
+    assert_eq!(viewer.geometry_versions, [2], "one geometry change, announced before its colours");
+    // The served geometry moved the block's corners, and nothing else.
+    let after = fetch().await.unwrap();
+    let block = before.objects.iter().position(|o| o == "short_block").unwrap() as u32;
+    let block_corners: std::collections::BTreeSet<u32> = before.patches.iter().zip(&before.patch_objects).filter(|(_, o)| **o == block).flat_map(|(p, _)| p.iter().copied().filter(|c| *c != wire::geometry::NO_CORNER)).collect();
+    for (i, (a, b)) in before.positions.iter().zip(&after.positions).enumerate() {
+        let expected = if block_corners.contains(&(i as u32)) { [a[0] + 40.0, a[1], a[2] - 30.0] } else { *a };
+        assert!(expected.iter().zip(b).all(|(e, g)| (e - g).abs() < 1e-3), "corner {i}: {b:?} vs {expected:?}");
+    }
+    // The colours are those of the moved scene.
+    let scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+    let mut mesh = solver::Mesh::build(&scene, request().patches);
+    let mut moved_scene = scene.clone();
+    moved_scene.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
+    mesh.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
+    let (expected, _) = solver::solve_mesh(&moved_scene, &mesh, &request(), &solver::no_progress).unwrap();
+    let expected: Vec<[f32; 3]> = expected.iter().map(|b| b.as_vec3().to_array()).collect();
+    assert_eq!(mismatch(&viewer.buffer, &expected), None);
 }

@@ -88,7 +88,7 @@ pub async fn run_viewer(url: String, delay: Duration, deadline: Instant) -> View
             }
         };
         let sent_at = match &message {
-            ServerMessage::Hello(_) => continue,
+            ServerMessage::Hello(_) | ServerMessage::GeometryChanged { .. } => continue,
             ServerMessage::Full(frame) => frame.info.sent_at_unix_micros,
             ServerMessage::Delta(frame) => frame.info.sent_at_unix_micros,
         };

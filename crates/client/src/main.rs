@@ -211,11 +211,14 @@ async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> any
     use futures_util::{SinkExt, StreamExt};
     use tokio_tungstenite::tungstenite::Message;
     use wire::{ClientMessage, PatchBuffer, ServerMessage};
-    let geometry = match &out_dir {
+    let fetch = || {
+        let base = http_base(url);
+        tokio::task::spawn_blocking(move || fetch_geometry(&base?))
+    };
+    let mut geometry = match &out_dir {
         Some(dir) => {
             std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-            let base = http_base(url)?;
-            Some(tokio::task::spawn_blocking(move || fetch_geometry(&base)).await??)
+            Some(fetch().await??)
         }
         None => None,
     };
@@ -228,6 +231,13 @@ async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> any
         let (changed, sent_at) = match &message {
             ServerMessage::Hello(hello) => {
                 println!("hello: scene {:016x}, {} patches, protocol {}", hello.scene_id, hello.patch_count, hello.protocol_version);
+                continue;
+            }
+            ServerMessage::GeometryChanged { geometry_version } => {
+                println!("geometry changed: version {geometry_version}");
+                if geometry.is_some() {
+                    geometry = Some(fetch().await??);
+                }
                 continue;
             }
             ServerMessage::Full(frame) => {

@@ -43,6 +43,8 @@ async fn run(url: &str) -> anyhow::Result<ViewerOutcome> {
         };
         let message = ServerMessage::decode(&data).with_context(|| format!("{url}: bad message from the server"))?;
         match (&message, hello) {
+            // Colours stay valid across a geometry change; a renderer refetches the geometry.
+            (ServerMessage::GeometryChanged { .. }, _) => continue,
             (ServerMessage::Hello(h), None) => hello = Some(*h),
             (ServerMessage::Hello(_), Some(_)) => bail!("{url}: a second hello"),
             (_, None) => bail!("{url}: a frame before the hello"),

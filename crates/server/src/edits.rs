@@ -13,27 +13,50 @@ pub struct Edits {
 
 #[derive(Debug, Default)]
 struct Pending {
-    emissions: BTreeMap<String, [f64; 3]>,
+    batch: Batch,
     closed: bool,
+}
+
+/// Edits taken together by the solver thread.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Batch {
+    /// The newest emission per object.
+    pub emissions: BTreeMap<String, [f64; 3]>,
+    /// The summed translation per object (translations compose by adding).
+    pub moves: BTreeMap<String, [f64; 3]>,
+}
+
+impl Batch {
+    fn is_empty(&self) -> bool {
+        self.emissions.is_empty() && self.moves.is_empty()
+    }
 }
 
 impl Edits {
     /// Records a new emission for `object`, replacing any not yet applied.
     pub fn set_emission(&self, object: &str, emission: [f64; 3]) {
         let mut pending = self.pending.lock().expect("edits lock");
-        pending.emissions.insert(object.to_string(), emission);
+        pending.batch.emissions.insert(object.to_string(), emission);
+        self.wake.notify_one();
+    }
+
+    /// Adds a translation of `object` to any not yet applied.
+    pub fn translate(&self, object: &str, offset: [f64; 3]) {
+        let mut pending = self.pending.lock().expect("edits lock");
+        let total = pending.batch.moves.entry(object.to_string()).or_insert([0.0; 3]);
+        (0..3).for_each(|k| total[k] += offset[k]);
         self.wake.notify_one();
     }
 
     /// Waits for edits and takes them all; `None` once closed.
-    pub fn wait(&self) -> Option<BTreeMap<String, [f64; 3]>> {
+    pub fn wait(&self) -> Option<Batch> {
         let mut pending = self.pending.lock().expect("edits lock");
         loop {
             if pending.closed {
                 return None;
             }
-            if !pending.emissions.is_empty() {
-                return Some(std::mem::take(&mut pending.emissions));
+            if !pending.batch.is_empty() {
+                return Some(std::mem::take(&mut pending.batch));
             }
             pending = self.wake.wait(pending).expect("edits lock");
         }
@@ -41,7 +64,8 @@ impl Edits {
 
     /// Objects with an edit not yet taken by the solver thread.
     pub fn pending(&self) -> usize {
-        self.pending.lock().expect("edits lock").emissions.len()
+        let pending = self.pending.lock().expect("edits lock");
+        pending.batch.emissions.len() + pending.batch.moves.len()
     }
 
     /// Ends [`Edits::wait`] for good (shutdown).
@@ -62,9 +86,13 @@ mod tests {
             edits.set_emission("light", [level as f64; 3]);
         }
         edits.set_emission("wall", [1.0, 0.0, 0.0]);
+        edits.translate("box", [1.0, 2.0, 0.0]);
+        edits.translate("box", [0.5, 0.0, -1.0]);
         let batch = edits.wait().expect("edits");
-        assert_eq!(batch.len(), 2);
-        assert_eq!(batch["light"], [99.0; 3]);
+        assert_eq!(batch.emissions.len(), 2);
+        assert_eq!(batch.emissions["light"], [99.0; 3]);
+        assert_eq!(batch.moves["box"], [1.5, 2.0, -1.0]);
+        assert_eq!(edits.pending(), 0);
         edits.close();
         assert_eq!(edits.wait(), None);
     }

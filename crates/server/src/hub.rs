@@ -26,17 +26,34 @@ pub struct Published {
     pub delta: Option<(u64, Bytes)>,
     /// [`wire::checksum`] of `colours`.
     pub checksum: u32,
+    /// The geometry version these colours belong to.
+    pub geometry_version: u64,
+}
+
+/// The geometry as served, replaced whole when an object moves.
+#[derive(Debug)]
+pub struct GeometryState {
+    /// Starts at 1; bumped by every move.
+    pub version: u64,
+    /// The encoded hello every viewer gets first.
+    pub hello: Bytes,
+    /// The encoded geometry served at `/api/scene`.
+    pub encoded: Bytes,
+    /// The same geometry, for exports.
+    pub model: Arc<Geometry>,
+}
+
+impl GeometryState {
+    fn new(scene_id: u64, version: u64, geometry: Geometry) -> GeometryState {
+        let hello = Hello { protocol_version: PROTOCOL_VERSION, scene_id, geometry_version: version, patch_count: geometry.patches.len() as u32 };
+        GeometryState { version, hello: ServerMessage::Hello(hello).encode().into(), encoded: geometry.encode().into(), model: Arc::new(geometry) }
+    }
 }
 
 /// Publishes solution versions and hands them to viewers.
 pub struct Hub {
     sender: watch::Sender<Arc<Published>>,
-    /// The encoded hello every viewer gets first.
-    pub hello: Bytes,
-    /// The encoded geometry served at `/api/scene`.
-    pub geometry: Bytes,
-    /// The same geometry, for exports.
-    pub geometry_model: Arc<Geometry>,
+    geometry: std::sync::RwLock<Arc<GeometryState>>,
     /// Identifies scene content and solve settings.
     pub scene_id: u64,
     /// Patches per frame.
@@ -63,20 +80,31 @@ impl Hub {
     /// A hub for `geometry`, publishing `initial` (non-final) as version 1.
     pub fn new(scene_id: u64, geometry: &Geometry, initial: &[[f32; 3]]) -> Hub {
         let patch_count = geometry.patches.len() as u32;
-        let hello = Hello { protocol_version: PROTOCOL_VERSION, scene_id, geometry_version: 1, patch_count };
         let (scale, colours) = encode(initial, None);
-        let first = Self::frames(1, false, scale, colours, None);
+        let first = Self::frames(1, false, scale, colours, None, 1);
         Hub {
             sender: watch::Sender::new(Arc::new(first)),
-            hello: ServerMessage::Hello(hello).encode().into(),
-            geometry: geometry.encode().into(),
-            geometry_model: Arc::new(geometry.clone()),
+            geometry: std::sync::RwLock::new(Arc::new(GeometryState::new(scene_id, 1, geometry.clone()))),
             scene_id,
             patch_count,
         }
     }
 
-    fn frames(version: u64, is_final: bool, scale: f32, colours: Vec<u32>, previous: Option<&Published>) -> Published {
+    /// The geometry as served now.
+    pub fn geometry(&self) -> Arc<GeometryState> {
+        self.geometry.read().expect("geometry lock").clone()
+    }
+
+    /// Replaces the geometry (same patches, moved) and returns its new version; frames
+    /// published from now on carry it, and viewers are told before their next frame.
+    pub fn replace_geometry(&self, geometry: Geometry) -> u64 {
+        let mut current = self.geometry.write().expect("geometry lock");
+        let version = current.version + 1;
+        *current = Arc::new(GeometryState::new(self.scene_id, version, geometry));
+        version
+    }
+
+    fn frames(version: u64, is_final: bool, scale: f32, colours: Vec<u32>, previous: Option<&Published>, geometry_version: u64) -> Published {
         let info = FrameInfo { solution_version: version, sent_at_unix_micros: now_micros(), scale, patch_count: colours.len() as u32, is_final };
         let delta = previous.filter(|p| p.scale == scale).map(|p| {
             let (indices, changed) = wire::changes(&p.colours, &colours);
@@ -84,18 +112,19 @@ impl Hub {
             (p.version, Bytes::from(ServerMessage::Delta(frame).encode()))
         });
         let full = Bytes::from(ServerMessage::Full(FullFrame { info, colours: colours.clone() }).encode());
-        Published { version, is_final, checksum: wire::checksum(&colours), colours: Arc::new(colours), scale, full, delta }
+        Published { version, is_final, checksum: wire::checksum(&colours), colours: Arc::new(colours), scale, full, delta, geometry_version }
     }
 
     /// Publishes a new state (radiosity in W/m^2) unless it encodes to what viewers already
     /// have; returns the version viewers will hold.
     pub fn publish(&self, radiosity: &[[f32; 3]], is_final: bool) -> u64 {
         let previous = self.current();
+        let geometry_version = self.geometry().version;
         let (scale, colours) = encode(radiosity, Some(previous.scale));
-        if previous.scale == scale && *previous.colours == colours && previous.is_final == is_final {
+        if previous.scale == scale && *previous.colours == colours && previous.is_final == is_final && previous.geometry_version == geometry_version {
             return previous.version;
         }
-        let next = Self::frames(previous.version + 1, is_final, scale, colours, Some(&previous));
+        let next = Self::frames(previous.version + 1, is_final, scale, colours, Some(&previous), geometry_version);
         let version = next.version;
         self.sender.send_replace(Arc::new(next));
         version

@@ -16,7 +16,7 @@ use serde::Serialize;
 use std::sync::Arc;
 
 /// The router: `/healthz`, `/api/scene`, `/api/scene.glb`, `/api/solution`, `/ws`, `/metrics`,
-/// and the control API `PUT /api/objects/{name}/emission` (bearer token).
+/// and the control API `PUT /api/objects/{name}/emission` and `.../transform` (bearer token).
 pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/healthz", get(|| async { "ok\n" }))
@@ -26,17 +26,18 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/ws", get(websocket))
         .route("/metrics", get(metrics))
         .route("/api/objects/{name}/emission", put(set_emission))
+        .route("/api/objects/{name}/transform", put(set_transform))
         .with_state(shared)
 }
 
 async fn scene(State(shared): State<Arc<Shared>>) -> Response {
-    ([(header::CONTENT_TYPE, "application/vnd.radcast.geometry")], shared.hub.geometry.clone()).into_response()
+    ([(header::CONTENT_TYPE, "application/vnd.radcast.geometry")], shared.hub.geometry().encoded.clone()).into_response()
 }
 
 /// The current state as binary glTF, decoded from the same codes viewers hold.
 async fn scene_glb(State(shared): State<Arc<Shared>>) -> Response {
     let current = shared.hub.current();
-    let geometry = shared.hub.geometry_model.clone();
+    let geometry = shared.hub.geometry().model.clone();
     let glb = tokio::task::spawn_blocking(move || {
         let radiosity: Vec<[f32; 3]> = current.colours.iter().map(|&c| wire::decode_colour(c, current.scale)).collect();
         wire::gltf::encode_glb(&geometry, &radiosity)
@@ -131,32 +132,45 @@ fn refuse(status: StatusCode, reason: String) -> Response {
     response
 }
 
-/// Checks an emission edit: the object exists and the body is `{"emission": [r, g, b]}` with
-/// finite, non-negative channels. Returns the emission or the reason.
-pub fn parse_emission_edit(objects: &[String], name: &str, body: &[u8]) -> Result<[f64; 3], (StatusCode, String)> {
+/// Checks an edit: the object exists and the body is `{"FIELD": [a, b, c]}` with finite
+/// numbers (and non-negative ones when `non_negative`). Returns the triple or the reason.
+pub fn parse_edit(objects: &[String], name: &str, body: &[u8], field: &str, non_negative: bool) -> Result<[f64; 3], (StatusCode, String)> {
     if !objects.iter().any(|o| o == name) {
         return Err((StatusCode::NOT_FOUND, format!("no object named '{name}'")));
     }
-    #[derive(serde::Deserialize)]
-    #[serde(deny_unknown_fields)]
-    struct Body {
-        emission: [f64; 3],
+    let shape = || format!("body must be JSON like {{\"{field}\": [a, b, c]}}");
+    let value: serde_json::Value = serde_json::from_slice(body).map_err(|e| (StatusCode::BAD_REQUEST, format!("{}: {e}", shape())))?;
+    let object = value.as_object().filter(|o| o.len() == 1).ok_or_else(|| (StatusCode::BAD_REQUEST, shape()))?;
+    let triple: [f64; 3] = object.get(field).and_then(|v| serde_json::from_value(v.clone()).ok()).ok_or_else(|| (StatusCode::BAD_REQUEST, shape()))?;
+    let allowed = |c: &f64| c.is_finite() && (!non_negative || *c >= 0.0);
+    if !triple.iter().all(allowed) {
+        let rule = if non_negative { "finite and >= 0" } else { "finite" };
+        return Err((StatusCode::BAD_REQUEST, format!("{field} {triple:?} must have every value {rule}")));
     }
-    let body: Body = serde_json::from_slice(body).map_err(|e| (StatusCode::BAD_REQUEST, format!("body must be JSON like {{\"emission\": [r, g, b]}}: {e}")))?;
-    if !body.emission.iter().all(|c| c.is_finite() && *c >= 0.0) {
-        return Err((StatusCode::BAD_REQUEST, format!("emission {:?} must have every channel finite and >= 0", body.emission)));
-    }
-    Ok(body.emission)
+    Ok(triple)
 }
 
 async fn set_emission(State(shared): State<Arc<Shared>>, Path(name): Path<String>, headers: HeaderMap, body: axum::body::Bytes) -> Response {
     if !authorized(&headers, &shared.token) {
         return refuse(StatusCode::UNAUTHORIZED, "missing or wrong bearer token".into());
     }
-    match parse_emission_edit(&shared.hub.geometry_model.objects, &name, &body) {
+    match parse_edit(&shared.hub.geometry().model.objects, &name, &body, "emission", true) {
         Ok(emission) => {
             shared.edits.set_emission(&name, emission);
             (StatusCode::ACCEPTED, axum::Json(serde_json::json!({ "object": name, "emission": emission, "status": "queued" }))).into_response()
+        }
+        Err((status, reason)) => refuse(status, reason),
+    }
+}
+
+async fn set_transform(State(shared): State<Arc<Shared>>, Path(name): Path<String>, headers: HeaderMap, body: axum::body::Bytes) -> Response {
+    if !authorized(&headers, &shared.token) {
+        return refuse(StatusCode::UNAUTHORIZED, "missing or wrong bearer token".into());
+    }
+    match parse_edit(&shared.hub.geometry().model.objects, &name, &body, "translate", false) {
+        Ok(offset) => {
+            shared.edits.translate(&name, offset);
+            (StatusCode::ACCEPTED, axum::Json(serde_json::json!({ "object": name, "translate": offset, "status": "queued" }))).into_response()
         }
         Err((status, reason)) => refuse(status, reason),
     }

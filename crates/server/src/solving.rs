@@ -179,16 +179,39 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, solution: Solution) -> 
     Ok(())
 }
 
-fn apply(session: &mut Session, shared: &Shared, batch: std::collections::BTreeMap<String, [f64; 3]>) {
+fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
     let started = Instant::now();
-    for (object, emission) in &batch {
-        if let Err(error) = session.set_emission(object, Rgb::from(*emission)) {
-            tracing::warn!("edit refused: {error}");
+    let mut moved = false;
+    for (object, offset) in &batch.moves {
+        match session.translate(object, DVec3::from(*offset)) {
+            Ok(report) => {
+                moved = true;
+                tracing::info!(object, pairs = report.pairs, entries = report.entries, ms = report.seconds * 1e3, "moved");
+            }
+            Err(error) => tracing::warn!("move refused: {error}"),
         }
     }
-    let report = session.solve(&solver::no_progress);
+    let mut report = None;
+    if moved {
+        // The moved scene from the current answer, then its new geometry for viewers.
+        report = Some(session.solve(&solver::no_progress));
+        shared.hub.replace_geometry(geometry_of(session.scene(), session.mesh()));
+    }
+    if !batch.emissions.is_empty() {
+        for (object, emission) in &batch.emissions {
+            if let Err(error) = session.set_emission(object, Rgb::from(*emission)) {
+                tracing::warn!("edit refused: {error}");
+            }
+        }
+        report = Some(session.solve(&solver::no_progress));
+    }
+    let report = report.unwrap_or_else(|| session.solve(&solver::no_progress));
     let version = shared.hub.publish(&to_f32(session.radiosity()), report.converged);
-    tracing::info!(version, edits = batch.len(), iterations = report.iterations, ms = started.elapsed().as_secs_f64() * 1e3, "re-solved");
+    tracing::info!(version, emissions = batch.emissions.len(), moves = batch.moves.len(), iterations = report.iterations, ms = started.elapsed().as_secs_f64() * 1e3, "re-solved");
+    if moved {
+        // Keep the lights' next edits instant on the moved scene.
+        session.prepare_emitters();
+    }
     if let Ok(json) = serde_json::to_value(&report) {
         *shared.report.lock().expect("report lock") = Some(json);
     }

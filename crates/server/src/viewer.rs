@@ -10,7 +10,7 @@ use std::net::IpAddr;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use tokio::time::{Instant, interval, timeout};
-use wire::ClientMessage;
+use wire::{ClientMessage, ServerMessage};
 
 /// A claimed place under the viewer limits; released however the connection ends, including
 /// an upgrade that never completes.
@@ -93,7 +93,9 @@ pub async fn serve_viewer(socket: WebSocket, slot: ViewerSlot) {
 
     let end = 'session: {
         let first = updates.borrow_and_update().clone();
-        for bytes in [shared.hub.hello.clone(), first.full.clone()] {
+        let geometry = shared.hub.geometry();
+        let mut held_geometry = geometry.version;
+        for bytes in [geometry.hello.clone(), first.full.clone()] {
             sent(&bytes);
             if !matches!(timeout(limits.send_timeout, sink.send(Message::Binary(bytes))).await, Ok(Ok(()))) {
                 break 'session End::Dropped(DropReason::Slow, "send timed out");
@@ -110,6 +112,15 @@ pub async fn serve_viewer(socket: WebSocket, slot: ViewerSlot) {
                         break 'session End::Shutdown;
                     }
                     let newest = updates.borrow_and_update().clone();
+                    if newest.geometry_version != held_geometry {
+                        // Tell the viewer to refetch the geometry before the colours that go with it.
+                        held_geometry = newest.geometry_version;
+                        let notice = Bytes::from(ServerMessage::GeometryChanged { geometry_version: held_geometry }.encode());
+                        sent(&notice);
+                        if !matches!(timeout(limits.send_timeout, sink.send(Message::Binary(notice))).await, Ok(Ok(()))) {
+                            break 'session End::Dropped(DropReason::Slow, "send timed out");
+                        }
+                    }
                     let bytes = match &newest.delta {
                         Some((base, delta)) if *base == held => delta.clone(),
                         _ => {

@@ -133,17 +133,42 @@ fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
     (inset(u0 + k as f64 * A1), inset(v0 + k as f64 * A2))
 }
 
-/// How many of `rays` segments between `p` and `q` that nothing blocks, as a hit count.
-fn clear_rays(p: &Patch, q: &Patch, pair: (usize, usize), rays: u32, occluders: &Occluders) -> u32 {
+/// The `rays` shadow segments between `p` and `q`: stratified points on both, decorrelated per
+/// pair, the same every time for the same pair.
+fn pair_segments<'a>(p: &'a Patch, q: &'a Patch, pair: (usize, usize), rays: u32) -> impl Iterator<Item = (DVec3, DVec3)> + 'a {
     let seed = splitmix64(((pair.0 as u64) << 32) | pair.1 as u64);
     let (seed_p, seed_q) = (seed, splitmix64(seed));
-    (0..rays)
-        .filter(|&k| {
-            let (u, v) = stratified_uv(k, seed_p);
-            let (s, t) = stratified_uv(k, seed_q);
-            occluders.segment_is_clear(p.polygon.point_at(u, v), q.polygon.point_at(s, t), [p.face, q.face])
-        })
-        .count() as u32
+    (0..rays).map(move |k| {
+        let (u, v) = stratified_uv(k, seed_p);
+        let (s, t) = stratified_uv(k, seed_q);
+        (p.polygon.point_at(u, v), q.polygon.point_at(s, t))
+    })
+}
+
+/// How many of `rays` segments between `p` and `q` nothing blocks.
+fn clear_rays(p: &Patch, q: &Patch, pair: (usize, usize), rays: u32, occluders: &Occluders) -> u32 {
+    pair_segments(p, q, pair, rays).filter(|(a, b)| occluders.segment_is_clear(*a, *b, [p.face, q.face])).count() as u32
+}
+
+/// Whether the segment from `a` to `b` meets the box `(lo, hi)` (the slab method).
+fn segment_meets_box(a: DVec3, b: DVec3, (lo, hi): (DVec3, DVec3)) -> bool {
+    let d = b - a;
+    let (mut enter, mut exit) = (0.0f64, 1.0f64);
+    for axis in 0..3 {
+        if d[axis] == 0.0 {
+            if a[axis] < lo[axis] || a[axis] > hi[axis] {
+                return false;
+            }
+            continue;
+        }
+        let (t0, t1) = ((lo[axis] - a[axis]) / d[axis], (hi[axis] - a[axis]) / d[axis]);
+        enter = enter.max(t0.min(t1));
+        exit = exit.min(t0.max(t1));
+        if enter > exit {
+            return false;
+        }
+    }
+    true
 }
 
 /// Unoccluded form factor from receiver `p` to source `q`: the area average over `p` of the
@@ -187,7 +212,7 @@ pub struct DenseFormFactors {
 /// What an incremental update recomputed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct UpdateStats {
-    /// Patch pairs whose visibility was recomputed.
+    /// Patch pairs whose visibility was traced again.
     pub pairs: usize,
     /// Rows (receivers) with at least one changed entry.
     pub rows: usize,
@@ -282,12 +307,15 @@ impl DenseFormFactors {
 
     /// Updates after the patches marked in `moved` changed place (`mesh` and `occluders` are
     /// already the new ones; `region` bounds the moved object before and after). A pair is
-    /// recomputed when it involves a moved patch or when its bounding box meets `region`:
-    /// every segment between two patches lies in their box, so no other pair's visibility can
-    /// change. Rows with a changed pair are recomputed whole.
+    /// traced again when it involves a moved patch, or when one of its own shadow segments
+    /// crosses `region`: all geometry that changed lies there, so no other segment's answer can
+    /// differ. Only changed entries are integrated again.
     pub fn update_moved(&mut self, mesh: &Mesh, occluders: &Occluders, moved: &[bool], region: (DVec3, DVec3)) -> UpdateStats {
         let (patches, n, settings) = (&mesh.patches, self.n, self.settings);
         let boxes: Vec<(DVec3, DVec3)> = patches.iter().map(|p| bounds(p.polygon.corners())).collect();
+        // Grown by a relative hair, so that f32 ray tracing near the edge cannot disagree.
+        let margin = 1e-6 * (region.1 - region.0).length().max(boxes.iter().map(|b| (b.1 - b.0).length()).fold(0.0, f64::max));
+        let region = (region.0 - DVec3::splat(margin), region.1 + DVec3::splat(margin));
         let overlaps = |(lo, hi): (DVec3, DVec3)| lo.cmple(region.1).all() && hi.cmpge(region.0).all();
         let pairs = AtomicUsize::new(0);
         // Pass A: the pairs that can have changed, upper triangle; each row lists its changes.
@@ -299,7 +327,11 @@ impl DenseFormFactors {
                 let mut changed = Vec::new();
                 for j in i + 1..n {
                     let pair_box = (boxes[i].0.min(boxes[j].0), boxes[i].1.max(boxes[j].1));
-                    if !(moved[i] || moved[j] || overlaps(pair_box)) {
+                    let crosses = || {
+                        let (p, q) = (&patches[i], &patches[j]);
+                        mutually_facing(p, q) && pair_segments(p, q, (i, j), rays_for_pair(p, q, &settings)).any(|(a, b)| segment_meets_box(a, b, region))
+                    };
+                    if !(moved[i] || moved[j] || (overlaps(pair_box) && crosses())) {
                         continue;
                     }
                     pairs.fetch_add(1, Ordering::Relaxed);
@@ -312,10 +344,11 @@ impl DenseFormFactors {
                 changed
             })
             .collect();
-        mirror_upper_triangle(&mut self.clear, n);
+        // Mirror only what changed; the rest of the lower triangle still agrees.
         let mut changed: Vec<Vec<u32>> = vec![Vec::new(); n];
         for (i, columns) in changed_upper.iter().enumerate() {
             for &j in columns {
+                self.clear[j as usize * n + i] = self.clear[i * n + j as usize];
                 changed[i].push(j);
                 changed[j as usize].push(i as u32);
             }

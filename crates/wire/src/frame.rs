@@ -21,6 +21,7 @@ pub const FLAG_FINAL: u8 = 2;
 const KIND_HELLO: u8 = 1;
 const KIND_FULL: u8 = 2;
 const KIND_DELTA: u8 = 3;
+const KIND_GEOMETRY_CHANGED: u8 = 4;
 const KIND_REQUEST_FULL: u8 = 16;
 
 /// Fixed-width little-endian integers: every header has one fixed layout (docs/PROTOCOL.md).
@@ -87,6 +88,12 @@ pub enum ServerMessage {
     Full(FullFrame),
     /// Changes against an earlier version.
     Delta(DeltaFrame),
+    /// The geometry changed (an object moved): fetch `/api/scene` again. Patch count and
+    /// order stay the same, so the colour buffer stays valid.
+    GeometryChanged {
+        /// The new geometry version.
+        geometry_version: u64,
+    },
 }
 
 /// A message from a viewer.
@@ -142,6 +149,7 @@ impl ServerMessage {
     pub fn encode(&self) -> Vec<u8> {
         match self {
             ServerMessage::Hello(hello) => encode_header(KIND_HELLO, 0, hello),
+            ServerMessage::GeometryChanged { geometry_version } => encode_header(KIND_GEOMETRY_CHANGED, 0, geometry_version),
             ServerMessage::Full(frame) => {
                 let info = &frame.info;
                 let header = FullHeader {
@@ -221,6 +229,12 @@ impl ServerMessage {
                 }
                 let info = frame_info(header.solution_version, header.sent_at_unix_micros, header.scale, header.patch_count, flags)?;
                 Ok(ServerMessage::Delta(DeltaFrame { base_version: header.base_version, info, indices, colours: read_codes(colour_bytes) }))
+            }
+            KIND_GEOMETRY_CHANGED => {
+                check_flags(flags, 0)?;
+                let (geometry_version, used): (u64, usize) = decode_header(rest)?;
+                expect_end(&rest[used..])?;
+                Ok(ServerMessage::GeometryChanged { geometry_version })
             }
             other => Err(DecodeError::UnknownKind(other)),
         }

@@ -136,10 +136,10 @@ pub struct PatchBuffer {
 }
 
 impl PatchBuffer {
-    /// Applies a frame; a hello changes nothing.
+    /// Applies a frame; a hello or a geometry change changes no colour.
     pub fn apply(&mut self, message: &ServerMessage) -> Result<(), ApplyError> {
         match message {
-            ServerMessage::Hello(_) => {}
+            ServerMessage::Hello(_) | ServerMessage::GeometryChanged { .. } => {}
             ServerMessage::Full(frame) => {
                 self.colours.clone_from(&frame.colours);
                 self.info = Some(frame.info);

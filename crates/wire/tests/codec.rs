@@ -23,6 +23,15 @@ fn hello_round_trips_and_other_versions_are_refused() {
 }
 
 #[test]
+fn geometry_changes_round_trip() {
+    let message = ServerMessage::GeometryChanged { geometry_version: 7 };
+    let bytes = message.encode();
+    assert_eq!(bytes, [4, 0, 7, 0, 0, 0, 0, 0, 0, 0]);
+    assert_eq!(ServerMessage::decode(&bytes), Ok(message));
+    assert!(ServerMessage::decode(&bytes[..9]).is_err());
+}
+
+#[test]
 fn uniform_frames_compress_and_noisy_ones_do_not() {
     let uniform = full(vec![0x1234_5678; 10_000]).encode();
     assert_ne!(uniform[1] & FLAG_COMPRESSED, 0);
