@@ -211,7 +211,7 @@ pub fn summarize(stats: Vec<ViewerStats>, server: Vec<(String, f64)>, load_teste
             None => failures.push((reason, 1)),
         }
     }
-    failures.sort_by(|a, b| b.1.cmp(&a.1));
+    failures.sort_by_key(|(_, count)| std::cmp::Reverse(*count));
     failures.truncate(5);
     let micros = |d: Duration| d.as_micros() as u64;
     LoadReport {

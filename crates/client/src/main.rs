@@ -157,8 +157,8 @@ async fn load(url: String, clients: usize, ramp: f64, duration: f64, json: bool,
         .map(|k| tokio::spawn(client::load::run_viewer(url.clone(), ramp.mul_f64(k as f64 / clients as f64), deadline)))
         .collect();
     // Edits start once every viewer is connected and stop a second before the end.
-    let edits = match editor {
-        Some(editor) => Some(tokio::task::spawn_blocking(move || -> anyhow::Result<Vec<u64>> {
+    let edits = editor.map(|editor| {
+        tokio::task::spawn_blocking(move || -> anyhow::Result<Vec<u64>> {
             std::thread::sleep(ramp + Duration::from_millis(500)); // wait out the ramp: pacing, not synchronisation
             let mut times = Vec::new();
             for k in 0.. {
@@ -169,9 +169,8 @@ async fn load(url: String, clients: usize, ramp: f64, duration: f64, json: bool,
                 std::thread::sleep(Duration::from_secs(1)); // one edit a second
             }
             Ok(times)
-        })),
-        None => None,
-    };
+        })
+    });
     let mut stats = Vec::with_capacity(clients);
     for viewer in viewers {
         stats.push(viewer.await?);

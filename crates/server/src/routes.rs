@@ -150,28 +150,26 @@ pub fn parse_edit(objects: &[String], name: &str, body: &[u8], field: &str, non_
     Ok(triple)
 }
 
-async fn set_emission(State(shared): State<Arc<Shared>>, Path(name): Path<String>, headers: HeaderMap, body: axum::body::Bytes) -> Response {
-    if !authorized(&headers, &shared.token) {
+/// The control API: check the token, parse `{"FIELD": [a, b, c]}`, queue the edit.
+fn edit(shared: &Shared, name: &str, headers: &HeaderMap, body: &[u8], field: &str, non_negative: bool, queue: fn(&crate::edits::Edits, &str, [f64; 3])) -> Response {
+    if !authorized(headers, &shared.token) {
         return refuse(StatusCode::UNAUTHORIZED, "missing or wrong bearer token".into());
     }
-    match parse_edit(&shared.hub.geometry().model.objects, &name, &body, "emission", true) {
-        Ok(emission) => {
-            shared.edits.set_emission(&name, emission);
-            (StatusCode::ACCEPTED, axum::Json(serde_json::json!({ "object": name, "emission": emission, "status": "queued" }))).into_response()
+    match parse_edit(&shared.hub.geometry().model.objects, name, body, field, non_negative) {
+        Ok(value) => {
+            queue(&shared.edits, name, value);
+            let mut reply = serde_json::json!({ "object": name, "status": "queued" });
+            reply[field] = serde_json::json!(value);
+            (StatusCode::ACCEPTED, axum::Json(reply)).into_response()
         }
         Err((status, reason)) => refuse(status, reason),
     }
 }
 
+async fn set_emission(State(shared): State<Arc<Shared>>, Path(name): Path<String>, headers: HeaderMap, body: axum::body::Bytes) -> Response {
+    edit(&shared, &name, &headers, &body, "emission", true, crate::edits::Edits::set_emission)
+}
+
 async fn set_transform(State(shared): State<Arc<Shared>>, Path(name): Path<String>, headers: HeaderMap, body: axum::body::Bytes) -> Response {
-    if !authorized(&headers, &shared.token) {
-        return refuse(StatusCode::UNAUTHORIZED, "missing or wrong bearer token".into());
-    }
-    match parse_edit(&shared.hub.geometry().model.objects, &name, &body, "translate", false) {
-        Ok(offset) => {
-            shared.edits.translate(&name, offset);
-            (StatusCode::ACCEPTED, axum::Json(serde_json::json!({ "object": name, "translate": offset, "status": "queued" }))).into_response()
-        }
-        Err((status, reason)) => refuse(status, reason),
-    }
+    edit(&shared, &name, &headers, &body, "translate", false, crate::edits::Edits::translate)
 }
