@@ -329,7 +329,12 @@ impl DenseFormFactors {
                     let pair_box = (boxes[i].0.min(boxes[j].0), boxes[i].1.max(boxes[j].1));
                     let crosses = || {
                         let (p, q) = (&patches[i], &patches[j]);
-                        mutually_facing(p, q) && pair_segments(p, q, (i, j), rays_for_pair(p, q, &settings)).any(|(a, b)| segment_meets_box(a, b, region))
+                        // Every segment from p to q stays within max(r_p, r_q) of the segment
+                        // between their centroids: one slab test rules most pairs out.
+                        let reach = DVec3::splat(p.radius.max(q.radius));
+                        segment_meets_box(p.centroid, q.centroid, (region.0 - reach, region.1 + reach))
+                            && mutually_facing(p, q)
+                            && pair_segments(p, q, (i, j), rays_for_pair(p, q, &settings)).any(|(a, b)| segment_meets_box(a, b, region))
                     };
                     if !(moved[i] || moved[j] || (overlaps(pair_box) && crosses())) {
                         continue;
@@ -354,24 +359,29 @@ impl DenseFormFactors {
             }
         }
         // Pass B: integrate only the changed entries of each row again; a moved receiver's
-        // whole row, since its own quadrature moved. Then normalise anew.
+        // whole row, since its own quadrature moved. A row whose normalisation stays the same
+        // (an open view) is only written where it changed.
         let clear = &self.clear;
         let entries = AtomicUsize::new(0);
         self.values.par_chunks_mut(n.max(1)).zip(self.row_scale.par_iter_mut()).enumerate().filter(|(i, _)| !changed[*i].is_empty()).for_each(|(i, (row, scale))| {
             let clear_row = &clear[i * n..(i + 1) * n];
-            let mut raw: Vec<f64> = if moved[i] {
+            if moved[i] {
                 entries.fetch_add(n, Ordering::Relaxed);
-                (0..n).map(|j| raw_entry(patches, i, j, clear_row[j], &settings)).collect()
-            } else {
-                entries.fetch_add(changed[i].len(), Ordering::Relaxed);
-                row.iter().map(|v| *v as f64 / *scale).collect()
-            };
-            if !moved[i] {
-                for &j in &changed[i] {
-                    raw[j as usize] = raw_entry(patches, i, j as usize, clear_row[j as usize], &settings);
-                }
+                *scale = normalise_row(patches, i, (0..n).map(|j| raw_entry(patches, i, j, clear_row[j], &settings)), occluders, row);
+                return;
             }
-            *scale = normalise_row(patches, i, raw.into_iter(), occluders, row);
+            entries.fetch_add(changed[i].len(), Ordering::Relaxed);
+            let updates: Vec<(usize, f64)> = changed[i].iter().map(|&j| (j as usize, raw_entry(patches, i, j as usize, clear_row[j as usize], &settings))).collect();
+            let old_raw_sum: f64 = row.iter().map(|v| *v as f64).sum::<f64>() / *scale;
+            let raw_sum = old_raw_sum + updates.iter().map(|(j, raw)| raw - row[*j] as f64 / *scale).sum::<f64>();
+            let new_scale = if raw_sum > 0.0 && sees_closed_view(&patches[i], i, occluders) { 1.0 / raw_sum } else { 1.0 };
+            if new_scale == 1.0 && *scale == 1.0 {
+                updates.iter().for_each(|(j, raw)| row[*j] = *raw as f32);
+            } else {
+                let mut raw: Vec<f64> = row.iter().map(|v| *v as f64 / *scale).collect();
+                updates.iter().for_each(|(j, value)| raw[*j] = *value);
+                *scale = normalise_row(patches, i, raw.into_iter(), occluders, row);
+            }
         });
         UpdateStats { pairs: pairs.into_inner(), rows: changed.iter().filter(|c| !c.is_empty()).count(), entries: entries.into_inner() }
     }
@@ -387,6 +397,26 @@ impl DenseFormFactors {
     }
 }
 
+/// `sum_j row_j * channel_j` for the three channels in one pass over the row (the product is
+/// bound by reading the matrix), in f64 with eight independent partial sums per channel, a
+/// shape compilers turn into SIMD (one running sum cannot be reordered, so it stays scalar).
+fn dot3(row: &[f32], channels: &[Vec<f64>; 3]) -> Rgb {
+    const LANES: usize = 8;
+    let mut partial = [[0.0f64; LANES]; 3];
+    let whole = row.len() / LANES * LANES;
+    for start in (0..whole).step_by(LANES) {
+        let f = &row[start..start + LANES];
+        for (c, channel) in channels.iter().enumerate() {
+            let v = &channel[start..start + LANES];
+            for k in 0..LANES {
+                partial[c][k] += f[k] as f64 * v[k];
+            }
+        }
+    }
+    let total = |c: usize| partial[c].iter().sum::<f64>() + (whole..row.len()).map(|j| row[j] as f64 * channels[c][j]).sum::<f64>();
+    Rgb::new(total(0), total(1), total(2))
+}
+
 impl Transport for DenseFormFactors {
     fn patch_count(&self) -> usize {
         self.n
@@ -394,6 +424,13 @@ impl Transport for DenseFormFactors {
 
     fn gather_row(&self, i: usize, radiosity: &[Rgb]) -> Rgb {
         self.row(i).iter().zip(radiosity).map(|(&f, b)| *b * f as f64).sum()
+    }
+
+    fn gather(&self, radiosity: &[Rgb], out: &mut [Rgb]) {
+        // One channel at a time over contiguous arrays: the matrix-vector product dominates
+        // every solver, and this layout lets it vectorise (about 2x the per-row Rgb sum).
+        let channels: [Vec<f64>; 3] = std::array::from_fn(|c| radiosity.iter().map(|b| b[c]).collect());
+        out.par_iter_mut().enumerate().for_each(|(i, o)| *o = dot3(self.row(i), &channels));
     }
 
     fn for_each_in_column(&self, j: usize, visit: &mut dyn FnMut(usize, f64)) {
