@@ -7,7 +7,7 @@
 //! where the integrand varies fastest; far pairs use the centroid.
 
 use crate::Progress;
-use crate::geometry::point_to_polygon_form_factor;
+use crate::geometry::{bounds, cosine_direction, point_to_polygon_form_factor};
 use crate::mesh::{Mesh, Patch};
 use crate::scene::Rgb;
 use crate::visibility::Occluders;
@@ -81,15 +81,11 @@ const CLOSURE_RAYS: u32 = 64;
 /// row must sum to one however coarsely visibility was sampled. Rays that escape or meet a back
 /// face mean the view is open, and the row is left as computed.
 fn sees_closed_view(p: &Patch, index: usize, occluders: &Occluders) -> bool {
-    let (tangent, bitangent) = p.normal.any_orthonormal_pair();
     let seed = splitmix64(index as u64 ^ 0xC105_ED00);
     (0..CLOSURE_RAYS).all(|k| {
         let (u, v) = stratified_uv(k, seed);
         let (s, t) = stratified_uv(k, splitmix64(seed));
-        // Malley's method: uniform points on the disc, lifted to the hemisphere (pbrt 4e, 13.6).
-        let (radius, angle) = (s.sqrt(), std::f64::consts::TAU * t);
-        let direction = tangent * (radius * angle.cos()) + bitangent * (radius * angle.sin()) + p.normal * (1.0 - s).sqrt();
-        occluders.closest_hit(p.polygon.point_at(u, v), direction.normalize(), p.face).is_some_and(|hit| hit.front)
+        occluders.closest_hit(p.polygon.point_at(u, v), cosine_direction(p.normal, s, t), p.face).is_some_and(|hit| hit.front)
     })
 }
 
@@ -258,10 +254,6 @@ fn normalise_row(patches: &[Patch], i: usize, raw: impl Iterator<Item = f64>, oc
     scale
 }
 
-fn bounds(points: &[DVec3]) -> (DVec3, DVec3) {
-    points.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
-}
-
 impl DenseFormFactors {
     /// Bytes the form factors and clear-ray counts for `n` patches need.
     pub fn memory_bytes(n: usize) -> u64 {
@@ -312,7 +304,7 @@ impl DenseFormFactors {
     /// differ. Only changed entries are integrated again.
     pub fn update_moved(&mut self, mesh: &Mesh, occluders: &Occluders, moved: &[bool], region: (DVec3, DVec3)) -> UpdateStats {
         let (patches, n, settings) = (&mesh.patches, self.n, self.settings);
-        let boxes: Vec<(DVec3, DVec3)> = patches.iter().map(|p| bounds(p.polygon.corners())).collect();
+        let boxes: Vec<(DVec3, DVec3)> = patches.iter().map(|p| bounds(p.polygon.corners().iter().copied())).collect();
         // Grown by a relative hair, so that f32 ray tracing near the edge cannot disagree.
         let margin = 1e-6 * (region.1 - region.0).length().max(boxes.iter().map(|b| (b.1 - b.0).length()).fold(0.0, f64::max));
         let region = (region.0 - DVec3::splat(margin), region.1 + DVec3::splat(margin));

@@ -268,7 +268,7 @@ impl Session {
         self.scene.translate_object(object, offset);
         swept.extend(corners(&self.scene));
         self.mesh.translate_object(object, offset);
-        let region = swept.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        let region = crate::geometry::bounds(swept);
         let moved: Vec<bool> = self.patch_objects.iter().map(|o| *o == object).collect();
         let occluders = Occluders::new(&self.scene);
         let stats = self.form_factors.update_moved(&self.mesh, &occluders, &moved, region);
@@ -306,10 +306,10 @@ impl Session {
         Ok(())
     }
 
-    /// Solves for `emission` from zero.
-    fn solve_for(&self, emission: &[Rgb], progress: &(dyn Fn(Progress) + Sync)) -> SolveOutcome {
+    /// Solves for `emission` from `initial` (or zero).
+    fn solve_for(&self, emission: &[Rgb], initial: Option<&[Rgb]>, progress: &(dyn Fn(Progress) + Sync)) -> SolveOutcome {
         let system = System { reflectance: &self.reflectance, emission, area: &self.area };
-        solve(&self.form_factors, &system, &self.settings, None, progress)
+        solve(&self.form_factors, &system, &self.settings, initial, progress)
     }
 
     /// Computes the responses of `object` unless known; returns the solver iterations spent.
@@ -318,7 +318,7 @@ impl Session {
             return 0;
         }
         let mask = |value: &dyn Fn(usize) -> Rgb| -> Vec<Rgb> { (0..self.emission.len()).map(|i| if self.patch_objects[i] == object { value(i) } else { Rgb::ZERO }).collect() };
-        let unit = self.solve_for(&mask(&|_| Rgb::ONE), &no_progress);
+        let unit = self.solve_for(&mask(&|_| Rgb::ONE), None, &no_progress);
         let original_emission = mask(&|i| self.emission[i]);
         let mut iterations = unit.iterations;
         // Uniform original emission needs no second solve: its response is e * G.
@@ -327,7 +327,7 @@ impl Session {
         let original = if uniform {
             unit.radiosity.iter().map(|g| *g * first).collect()
         } else {
-            let solved = self.solve_for(&original_emission, &no_progress);
+            let solved = self.solve_for(&original_emission, None, &no_progress);
             iterations += solved.iterations;
             solved.radiosity
         };
@@ -348,8 +348,7 @@ impl Session {
         let clock = Instant::now();
         let (iterations, residual, converged) = if self.edited.is_empty() {
             // From the current answer: after a move, most of it still holds.
-            let system = System { reflectance: &self.reflectance, emission: &self.emission, area: &self.area };
-            let outcome = solve(&self.form_factors, &system, &self.settings, Some(&self.radiosity), progress);
+            let outcome = self.solve_for(&self.emission, Some(&self.radiosity), progress);
             self.base.clone_from(&outcome.radiosity);
             self.radiosity = outcome.radiosity;
             (outcome.iterations, outcome.residual, outcome.converged)

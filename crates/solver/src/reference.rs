@@ -7,6 +7,7 @@
 //! (seed, probe index), so the result is the same for any thread count.
 
 use crate::Progress;
+use crate::geometry::cosine_direction;
 use crate::scene::{Rgb, Scene};
 use crate::visibility::Occluders;
 use glam::DVec3;
@@ -74,13 +75,6 @@ pub fn place_probes(scene: &Scene, count: usize, seed: u64) -> Vec<(u32, DVec3)>
             (face as u32, scene.faces[face].polygon.uniform_point(u, v, w))
         })
         .collect()
-}
-
-/// A direction about `normal` with density `cos / pi` (Malley's method, pbrt 4e, 13.6).
-fn cosine_direction(normal: DVec3, u: f64, v: f64) -> DVec3 {
-    let (radius, angle) = (u.sqrt(), 2.0 * PI * v);
-    let (tangent, bitangent) = normal.any_orthonormal_pair();
-    (tangent * (radius * angle.cos()) + bitangent * (radius * angle.sin()) + normal * (1.0 - u).max(0.0).sqrt()).normalize()
 }
 
 struct Tracer<'a> {

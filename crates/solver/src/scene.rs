@@ -181,13 +181,14 @@ impl Scene {
         }
     }
 
+    /// The axis-aligned box around every face, or `None` for a scene without faces.
+    pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
+        (!self.faces.is_empty()).then(|| crate::geometry::bounds(self.faces.iter().flat_map(|f| f.polygon.corners().iter().copied())))
+    }
+
     /// Drops faces whose area is negligible against the scene's size, counting them.
     pub fn drop_degenerate_faces(&mut self) {
-        let (lo, hi) = self.faces.iter().flat_map(|f| f.polygon.corners().to_vec()).fold(
-            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |(lo, hi), p| (lo.min(p), hi.max(p)),
-        );
-        let diagonal_sq = if self.faces.is_empty() { 0.0 } else { (hi - lo).length_squared() };
+        let diagonal_sq = self.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length_squared());
         let before = self.faces.len();
         // Area ratios down to 1e-12 of the scene are real geometry (issue: tiny next to huge).
         self.faces.retain(|f| f.polygon.area() > 1e-14 * diagonal_sq);

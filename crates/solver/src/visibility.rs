@@ -103,11 +103,7 @@ impl Occluders {
 
     /// Builds the given kind of index over every face of `scene`.
     pub fn with_backend(scene: &Scene, backend: RayBackend) -> Self {
-        let (lo, hi) = scene.faces.iter().flat_map(|f| f.polygon.corners().to_vec()).fold(
-            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |(lo, hi), p| (lo.min(p), hi.max(p)),
-        );
-        let centre = if scene.faces.is_empty() { DVec3::ZERO } else { (lo + hi) * 0.5 };
+        let (centre, diagonal) = scene.bounds().map_or((DVec3::ZERO, 0.0), |(lo, hi)| ((lo + hi) * 0.5, (hi - lo).length()));
         let faces: Vec<OccluderFace> = scene
             .faces
             .iter()
@@ -127,8 +123,7 @@ impl Occluders {
             RayBackend::Bvh2 => Index::Bvh2(build_bvh2(&faces, params, &mut Duration::default())),
             RayBackend::Linear => Index::Linear,
         };
-        let diagonal = if scene.faces.is_empty() { 0.0 } else { (hi - lo).length() as f32 };
-        Occluders { index, faces, centre, start_offset: 1e-6 * diagonal }
+        Occluders { index, faces, centre, start_offset: 1e-6 * diagonal as f32 }
     }
 
     /// The nearest face along the ray from `origin` in the unit `direction`, ignoring face
