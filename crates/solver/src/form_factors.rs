@@ -16,21 +16,28 @@ use glam::DVec3;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
 /// How light moves between patches: what every solver needs from form factors. A dense matrix
-/// implements it today; a hierarchical link list can implement it without touching the solvers.
+/// and a hierarchical link list ([`crate::hierarchy::Hierarchy`]) both implement it.
 pub trait Transport: Sync {
     /// Number of patches (rows and columns).
     fn patch_count(&self) -> usize;
 
+    /// `out_i = sum_j F_ij B_j` for every `i`: the irradiance each patch gathers from `radiosity`.
+    fn gather(&self, radiosity: &[Rgb], out: &mut [Rgb]);
+
+    /// Single rows and columns, for methods that update one patch at a time (Gauss-Seidel,
+    /// progressive); `None` where the operator exists only as a whole product.
+    fn entries(&self) -> Option<&dyn Entries> {
+        None
+    }
+}
+
+/// Single rows and columns of the form-factor matrix.
+pub trait Entries: Sync {
     /// Irradiance gathered by patch `i` from `radiosity`: `sum_j F_ij B_j`.
     fn gather_row(&self, i: usize, radiosity: &[Rgb]) -> Rgb;
 
     /// Calls `visit(i, F_ij)` for every receiver `i` with a non-zero factor from source `j`.
     fn for_each_in_column(&self, j: usize, visit: &mut dyn FnMut(usize, f64));
-
-    /// `out_i = sum_j F_ij B_j` for every `i`, in parallel.
-    fn gather(&self, radiosity: &[Rgb], out: &mut [Rgb]) {
-        out.par_iter_mut().enumerate().for_each(|(i, o)| *o = self.gather_row(i, radiosity));
-    }
 }
 
 /// Accuracy knobs of the form-factor computation.
@@ -63,7 +70,7 @@ const MAX_PAIR_LEVEL: u32 = 6;
 /// between `p`'s centroid and the nearest the source can come (zero for touching patches).
 ///
 /// [`Polygon::for_each_quadrature_point`]: crate::geometry::Polygon::for_each_quadrature_point
-fn near_pair_level(p: &Patch, q: &Patch) -> Option<u32> {
+pub(crate) fn near_pair_level(p: &Patch, q: &Patch) -> Option<u32> {
     let distance = p.centroid.distance(q.centroid);
     if distance >= NEAR_FIELD_RADII * p.radius {
         return None;
@@ -80,7 +87,7 @@ const CLOSURE_RAYS: u32 = 64;
 /// patch meets the front of some face: then all the light leaving it lands on a patch, and its
 /// row must sum to one however coarsely visibility was sampled. Rays that escape or meet a back
 /// face mean the view is open, and the row is left as computed.
-fn sees_closed_view(p: &Patch, index: usize, occluders: &Occluders) -> bool {
+pub(crate) fn sees_closed_view(p: &Patch, index: usize, occluders: &Occluders) -> bool {
     let seed = splitmix64(index as u64 ^ 0xC105_ED00);
     (0..CLOSURE_RAYS).all(|k| {
         let (u, v) = stratified_uv(k, seed);
@@ -91,7 +98,7 @@ fn sees_closed_view(p: &Patch, index: usize, occluders: &Occluders) -> bool {
 
 /// Shadow rays between two patches: more for pairs that are near against their size, where
 /// visibility varies most across the pair. Symmetric in the pair.
-fn rays_for_pair(p: &Patch, q: &Patch, settings: &FormFactorSettings) -> u32 {
+pub(crate) fn rays_for_pair(p: &Patch, q: &Patch, settings: &FormFactorSettings) -> u32 {
     let distance = p.centroid.distance(q.centroid).max(f64::MIN_POSITIVE);
     let closeness = ((2.0 * p.radius.max(q.radius) / distance).ceil() as u32).clamp(1, 4);
     (settings.rays_per_pair.max(1) * closeness * closeness).min(MAX_RAYS_PER_PAIR)
@@ -99,7 +106,7 @@ fn rays_for_pair(p: &Patch, q: &Patch, settings: &FormFactorSettings) -> u32 {
 
 /// True when each patch has part of itself strictly in front of the other: otherwise no light
 /// passes between them in either direction (surfaces are one-sided).
-fn mutually_facing(p: &Patch, q: &Patch) -> bool {
+pub(crate) fn mutually_facing(p: &Patch, q: &Patch) -> bool {
     let tolerance = 1e-12 * (p.radius + q.radius);
     let in_front = |of: &Patch, other: &Patch| other.polygon.corners().iter().any(|c| (*c - of.centroid).dot(of.normal) > tolerance);
     in_front(p, q) && in_front(q, p)
@@ -111,7 +118,7 @@ const NOT_FACING: u8 = u8::MAX;
 
 /// SplitMix64 (Steele, Lea, Flood 2014): a well-mixed hash of the pair, so the sample pattern
 /// is deterministic yet decorrelated between pairs.
-fn splitmix64(mut x: u64) -> u64 {
+pub(crate) fn splitmix64(mut x: u64) -> u64 {
     x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
     x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
@@ -120,7 +127,7 @@ fn splitmix64(mut x: u64) -> u64 {
 
 /// The k-th point of Roberts' R2 sequence, rotated by `offset` (Cranley-Patterson), kept off the
 /// patch border so that a ray never starts on a shared edge.
-fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
+pub(crate) fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
     // Roberts 2018, "The Unreasonable Effectiveness of Quasirandom Sequences": 1/phi_2, 1/phi_2^2.
     const A1: f64 = 0.754_877_666_246_692_7;
     const A2: f64 = 0.569_840_290_998_053_2;
@@ -142,7 +149,7 @@ fn pair_segments<'a>(p: &'a Patch, q: &'a Patch, pair: (usize, usize), rays: u32
 }
 
 /// How many of `rays` segments between `p` and `q` nothing blocks.
-fn clear_rays(p: &Patch, q: &Patch, pair: (usize, usize), rays: u32, occluders: &Occluders) -> u32 {
+pub(crate) fn clear_rays(p: &Patch, q: &Patch, pair: (usize, usize), rays: u32, occluders: &Occluders) -> u32 {
     pair_segments(p, q, pair, rays).filter(|(a, b)| occluders.segment_is_clear(*a, *b, [p.face, q.face])).count() as u32
 }
 
@@ -169,7 +176,7 @@ fn segment_meets_box(a: DVec3, b: DVec3, (lo, hi): (DVec3, DVec3)) -> bool {
 
 /// Unoccluded form factor from receiver `p` to source `q`: the area average over `p` of the
 /// analytic point-to-polygon factor, with the receiver's quadrature `level`.
-fn unoccluded_form_factor(p: &Patch, q: &Patch, level: u32) -> f64 {
+pub(crate) fn unoccluded_form_factor(p: &Patch, q: &Patch, level: u32) -> f64 {
     let mut sum = 0.0;
     p.polygon.for_each_quadrature_point(level, |x, weight| sum += weight * point_to_polygon_form_factor(x, p.normal, &q.polygon, q.normal));
     sum
@@ -414,15 +421,21 @@ impl Transport for DenseFormFactors {
         self.n
     }
 
-    fn gather_row(&self, i: usize, radiosity: &[Rgb]) -> Rgb {
-        self.row(i).iter().zip(radiosity).map(|(&f, b)| *b * f as f64).sum()
-    }
-
     fn gather(&self, radiosity: &[Rgb], out: &mut [Rgb]) {
         // One channel at a time over contiguous arrays: the matrix-vector product dominates
         // every solver, and this layout lets it vectorise (about 2x the per-row Rgb sum).
         let channels: [Vec<f64>; 3] = std::array::from_fn(|c| radiosity.iter().map(|b| b[c]).collect());
         out.par_iter_mut().enumerate().for_each(|(i, o)| *o = dot3(self.row(i), &channels));
+    }
+
+    fn entries(&self) -> Option<&dyn Entries> {
+        Some(self)
+    }
+}
+
+impl Entries for DenseFormFactors {
+    fn gather_row(&self, i: usize, radiosity: &[Rgb]) -> Rgb {
+        self.row(i).iter().zip(radiosity).map(|(&f, b)| *b * f as f64).sum()
     }
 
     fn for_each_in_column(&self, j: usize, visit: &mut dyn FnMut(usize, f64)) {

@@ -6,6 +6,7 @@
 pub mod accuracy;
 pub mod form_factors;
 pub mod geometry;
+pub mod hierarchy;
 pub mod mesh;
 pub mod pipeline;
 pub mod reference;
@@ -13,7 +14,8 @@ pub mod scene;
 pub mod solve;
 pub mod visibility;
 
-pub use form_factors::{DenseFormFactors, FormFactorSettings, Transport};
+pub use form_factors::{DenseFormFactors, Entries, FormFactorSettings, Transport};
+pub use hierarchy::{HierarchySettings, HierarchyStats};
 pub use mesh::{Mesh, Patch, PatchTarget};
 pub use pipeline::{EditError, MoveReport, Session, SolveError, SolveReport, SolveRequest, Solved, solve_file, solve_mesh, solve_scene};
 pub use scene::{Material, Rgb, Scene, SceneError, View};

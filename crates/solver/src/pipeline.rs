@@ -2,10 +2,11 @@
 //! command and the server both run.
 
 use crate::{Progress, no_progress};
-use crate::form_factors::{DenseFormFactors, FormFactorSettings};
+use crate::form_factors::{DenseFormFactors, FormFactorSettings, Transport};
+use crate::hierarchy::{Hierarchy, HierarchySettings, HierarchyStats};
 use crate::mesh::{Mesh, PatchTarget};
 use crate::scene::{Rgb, Scene, SceneError};
-use crate::solve::{SolveOutcome, SolverSettings, System, solve};
+use crate::solve::{NeedsEntries, SolveOutcome, SolverSettings, System, solve};
 use crate::visibility::Occluders;
 use serde::Serialize;
 use glam::DVec3;
@@ -24,6 +25,9 @@ pub struct SolveRequest {
     pub solver: SolverSettings,
     /// Refuse meshes whose dense form-factor matrix would need more bytes than this.
     pub max_matrix_bytes: u64,
+    /// `Some`: hierarchical radiosity with clustering instead of a dense matrix on a uniform
+    /// mesh (`patches` is then unused: refinement decides the leaves).
+    pub hierarchy: Option<HierarchySettings>,
 }
 
 impl Default for SolveRequest {
@@ -33,6 +37,7 @@ impl Default for SolveRequest {
             form_factors: FormFactorSettings::default(),
             solver: SolverSettings::default(),
             max_matrix_bytes: 8 << 30,
+            hierarchy: None,
         }
     }
 }
@@ -43,6 +48,9 @@ pub enum SolveError {
     /// The scene file is bad.
     #[error(transparent)]
     Scene(#[from] SceneError),
+    /// The solver method cannot run on the chosen transport.
+    #[error(transparent)]
+    Method(#[from] NeedsEntries),
     /// The mesh is too fine for a dense matrix in the allowed memory.
     #[error("{patches} patches need {gib:.1} GiB for the dense form-factor matrix (limit {limit_gib:.1} GiB); ask for fewer patches")]
     TooLarge {
@@ -106,6 +114,9 @@ pub struct SolveReport {
     pub seconds: StageSeconds,
     /// Per object, in scene order.
     pub objects: Vec<ObjectRadiosity>,
+    /// Elements, links and refinement rounds of a hierarchical solve (absent for dense).
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub hierarchy: Option<HierarchyStats>,
 }
 
 /// A solved scene: the inputs, the patches and their radiosity.
@@ -131,15 +142,21 @@ pub fn solve_file(path: &Path, request: &SolveRequest, progress: &(dyn Fn(Progre
     Ok(solved)
 }
 
-/// Meshes, computes form factors and solves an already loaded scene.
+/// Meshes, computes form factors (or builds the hierarchy) and solves an already loaded scene.
 pub fn solve_scene(scene: Scene, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<Solved, SolveError> {
-    let start = Instant::now();
-    let mesh = Mesh::build(&scene, request.patches);
-    let mesh_seconds = start.elapsed().as_secs_f64();
-    let (radiosity, mut report) = solve_mesh(&scene, &mesh, request, progress)?;
-    report.seconds.mesh += mesh_seconds;
-    report.seconds.total += mesh_seconds;
-    Ok(Solved { scene, mesh, radiosity, report })
+    let mut session = match &request.hierarchy {
+        Some(settings) => Session::hierarchical(&scene, settings, request, progress)?,
+        None => {
+            let start = Instant::now();
+            let mesh = Mesh::build(&scene, request.patches);
+            let mesh_seconds = start.elapsed().as_secs_f64();
+            let mut session = Session::new(&scene, &mesh, request, progress)?;
+            session.seconds.mesh += mesh_seconds;
+            session
+        }
+    };
+    let report = session.solve(progress);
+    Ok(Solved { scene, mesh: session.mesh, radiosity: session.radiosity, report })
 }
 
 /// Form factors and solve for a mesh already built from `scene` (the server meshes first so
@@ -150,6 +167,21 @@ pub fn solve_mesh(scene: &Scene, mesh: &Mesh, request: &SolveRequest, progress: 
     Ok((session.radiosity, report))
 }
 
+/// How a session moves light between patches.
+enum Transfer {
+    Dense(DenseFormFactors),
+    Hierarchy(Box<Hierarchy>),
+}
+
+impl Transfer {
+    fn transport(&self) -> &dyn Transport {
+        match self {
+            Transfer::Dense(factors) => factors,
+            Transfer::Hierarchy(hierarchy) => hierarchy.as_ref(),
+        }
+    }
+}
+
 /// A solved scene kept live for emission changes. Radiosity is linear in emission,
 /// `B = (I - rho F)^-1 E`, so the session keeps, per edited object `k`, its response `G_k` to
 /// unit emission on its patches and `R_k` to its original emission; after edits,
@@ -158,7 +190,7 @@ pub fn solve_mesh(scene: &Scene, mesh: &Mesh, request: &SolveRequest, progress: 
 pub struct Session {
     scene: Scene,
     mesh: Mesh,
-    form_factors: DenseFormFactors,
+    transfer: Transfer,
     /// The solution for the scene's own emission.
     base: Vec<Rgb>,
     /// Per object: (response to unit emission, response to its original emission).
@@ -170,7 +202,7 @@ pub struct Session {
     reflectance: Vec<Rgb>,
     emission: Vec<Rgb>,
     area: Vec<f64>,
-    settings: SolverSettings,
+    request: SolveRequest,
     seconds: StageSeconds,
     triangles: usize,
     skipped_faces: usize,
@@ -191,7 +223,8 @@ pub enum EditError {
     InvalidTranslation([f64; 3]),
 }
 
-/// What moving an object cost.
+/// What moving an object cost. A hierarchy is built again: `pairs` and `entries` are then its
+/// links and `rows` its leaves.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct MoveReport {
     /// Patch pairs whose visibility was recomputed (of n(n-1)/2).
@@ -220,25 +253,46 @@ impl Session {
         let clock = Instant::now();
         let form_factors = DenseFormFactors::compute(mesh, &occluders, &request.form_factors, progress);
         seconds.form_factors = clock.elapsed().as_secs_f64();
+        Ok(Session::assemble(scene.clone(), mesh.clone(), Transfer::Dense(form_factors), request, seconds, vec![Rgb::ZERO; n]))
+    }
+
+    /// Builds the element and link hierarchy of `scene` (which also decides the patches: the
+    /// leaves); [`Session::solve`] then finishes from the refinement's last solution.
+    pub fn hierarchical(scene: &Scene, settings: &HierarchySettings, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<Session, SolveError> {
+        if request.solver.method.needs_entries() {
+            return Err(NeedsEntries(request.solver.method).into());
+        }
+        let mut seconds = StageSeconds::default();
+        let clock = Instant::now();
+        let occluders = Occluders::new(scene);
+        seconds.mesh = clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let (hierarchy, radiosity) = Hierarchy::build(scene, &occluders, settings, request.form_factors, &request.solver, progress)?;
+        seconds.form_factors = clock.elapsed().as_secs_f64();
+        let mesh = hierarchy.leaf_mesh();
+        Ok(Session::assemble(scene.clone(), mesh, Transfer::Hierarchy(Box::new(hierarchy)), request, seconds, radiosity))
+    }
+
+    fn assemble(scene: Scene, mesh: Mesh, transfer: Transfer, request: &SolveRequest, seconds: StageSeconds, radiosity: Vec<Rgb>) -> Session {
         let column = |f: fn(&crate::mesh::Patch) -> Rgb| mesh.patches.iter().map(f).collect::<Vec<_>>();
-        Ok(Session {
-            scene: scene.clone(),
-            mesh: mesh.clone(),
-            form_factors,
+        Session {
             objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
             patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
             reflectance: column(|p| p.reflectance),
             emission: column(|p| p.emission),
             area: mesh.patches.iter().map(|p| p.area).collect(),
-            settings: request.solver,
-            base: vec![Rgb::ZERO; n],
+            request: *request,
+            base: radiosity.clone(),
             responses: BTreeMap::new(),
             edited: BTreeMap::new(),
             seconds,
             triangles: scene.triangle_count(),
             skipped_faces: scene.skipped_degenerate_faces,
-            radiosity: vec![Rgb::ZERO; n],
-        })
+            radiosity,
+            scene,
+            mesh,
+            transfer,
+        }
     }
 
     /// The scene as it is now (after moves).
@@ -263,24 +317,40 @@ impl Session {
             return Err(EditError::InvalidTranslation(offset.to_array()));
         }
         let clock = Instant::now();
-        let corners = |scene: &Scene| scene.faces.iter().filter(|f| f.object == object).flat_map(|f| f.polygon.corners().to_vec()).collect::<Vec<_>>();
-        let mut swept = corners(&self.scene);
-        self.scene.translate_object(object, offset);
-        swept.extend(corners(&self.scene));
-        self.mesh.translate_object(object, offset);
-        let region = crate::geometry::bounds(swept);
-        let moved: Vec<bool> = self.patch_objects.iter().map(|o| *o == object).collect();
-        let occluders = Occluders::new(&self.scene);
-        let stats = self.form_factors.update_moved(&self.mesh, &occluders, &moved, region);
-        // The responses were for the old form factors: fold the edits into the emission and
-        // let the next solve start over from it.
+        // The responses were for the old transport: fold the edits into the emission (of the
+        // patches, and of the scene, which a hierarchy is rebuilt from) and let the next solve
+        // start over from it.
         for (object, emission) in std::mem::take(&mut self.edited) {
             for (e, _) in self.emission.iter_mut().zip(&self.patch_objects).filter(|(_, o)| **o == object) {
                 *e = emission;
             }
+            self.scene.faces.iter_mut().filter(|f| f.object == object).for_each(|f| f.emission = emission);
         }
         self.responses.clear();
-        Ok(MoveReport { pairs: stats.pairs, rows: stats.rows, entries: stats.entries, seconds: clock.elapsed().as_secs_f64() })
+        let corners = |scene: &Scene| scene.faces.iter().filter(|f| f.object == object).flat_map(|f| f.polygon.corners().to_vec()).collect::<Vec<_>>();
+        let mut swept = corners(&self.scene);
+        self.scene.translate_object(object, offset);
+        swept.extend(corners(&self.scene));
+        let occluders = Occluders::new(&self.scene);
+        match &mut self.transfer {
+            Transfer::Dense(form_factors) => {
+                self.mesh.translate_object(object, offset);
+                let moved: Vec<bool> = self.patch_objects.iter().map(|o| *o == object).collect();
+                let stats = form_factors.update_moved(&self.mesh, &occluders, &moved, crate::geometry::bounds(swept));
+                Ok(MoveReport { pairs: stats.pairs, rows: stats.rows, entries: stats.entries, seconds: clock.elapsed().as_secs_f64() })
+            }
+            Transfer::Hierarchy(_) => {
+                // Refinement depends on where light falls, so the hierarchy is built again: new
+                // leaves, which viewers get as a new geometry.
+                let settings = self.request.hierarchy.unwrap_or_default();
+                let (hierarchy, radiosity) = Hierarchy::build(&self.scene, &occluders, &settings, self.request.form_factors, &self.request.solver, &no_progress)
+                    .expect("Session::hierarchical refuses per-patch methods");
+                let (links, leaves) = (hierarchy.stats().links, hierarchy.stats().elements);
+                let (scene, request, seconds) = (std::mem::take(&mut self.scene), self.request, self.seconds);
+                *self = Session::assemble(scene, hierarchy.leaf_mesh(), Transfer::Hierarchy(Box::new(hierarchy)), &request, seconds, radiosity);
+                Ok(MoveReport { pairs: links, rows: leaves, entries: links, seconds: clock.elapsed().as_secs_f64() })
+            }
+        }
     }
 
     /// Radiosity per patch, W/m^2: zero until the first [`Session::solve`].
@@ -309,7 +379,8 @@ impl Session {
     /// Solves for `emission` from `initial` (or zero).
     fn solve_for(&self, emission: &[Rgb], initial: Option<&[Rgb]>, progress: &(dyn Fn(Progress) + Sync)) -> SolveOutcome {
         let system = System { reflectance: &self.reflectance, emission, area: &self.area };
-        solve(&self.form_factors, &system, &self.settings, initial, progress)
+        // Both constructors refuse a method the transport cannot run.
+        solve(self.transfer.transport(), &system, &self.request.solver, initial, progress).expect("method checked when the session was made")
     }
 
     /// Computes the responses of `object` unless known; returns the solver iterations spent.
@@ -365,7 +436,7 @@ impl Session {
             // Clamp round-off below zero, as the solver does.
             radiosity.iter_mut().for_each(|b| *b = b.max(Rgb::ZERO));
             self.radiosity = radiosity;
-            (iterations, self.settings.tolerance, true)
+            (iterations, self.request.solver.tolerance, true)
         };
         self.seconds.solve = clock.elapsed().as_secs_f64();
         self.seconds.total = self.seconds.mesh + self.seconds.form_factors + self.seconds.solve;
@@ -378,12 +449,15 @@ impl Session {
             patches: self.radiosity.len(),
             triangles: self.triangles,
             skipped_faces: self.skipped_faces,
-            method: self.settings.method.name().into(),
+            method: if self.request.hierarchy.is_some() { "hierarchical".into() } else { self.request.solver.method.name().into() },
             iterations,
             residual,
             converged,
-            tolerance: self.settings.tolerance,
-            rays: self.form_factors.rays_cast,
+            tolerance: self.request.solver.tolerance,
+            rays: match &self.transfer {
+                Transfer::Dense(factors) => factors.rays_cast,
+                Transfer::Hierarchy(hierarchy) => hierarchy.stats().rays,
+            },
             seconds: self.seconds,
             objects: self
                 .objects
@@ -391,6 +465,10 @@ impl Session {
                 .zip(area.iter().zip(&power))
                 .map(|(name, (a, p))| ObjectRadiosity { name: name.clone(), area: *a, radiosity: if *a > 0.0 { (*p / *a).to_array() } else { [0.0; 3] } })
                 .collect(),
+            hierarchy: match &self.transfer {
+                Transfer::Dense(_) => None,
+                Transfer::Hierarchy(hierarchy) => Some(hierarchy.stats()),
+            },
         }
     }
 }

@@ -6,7 +6,7 @@
 //! `|B - B*| <= |r| / (1 - max rho)`, which is why bright scenes need a small tolerance.
 
 use crate::Progress;
-use crate::form_factors::Transport;
+use crate::form_factors::{Entries, Transport};
 use crate::scene::Rgb;
 use rayon::prelude::*;
 use std::fmt;
@@ -114,6 +114,18 @@ impl System<'_> {
     }
 }
 
+/// A method that updates one patch at a time asked of a transport that has no single entries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{0} updates one patch at a time and needs single form-factor rows; this transport only offers whole products (use jacobi or gmres)")]
+pub struct NeedsEntries(pub Method);
+
+impl Method {
+    /// Whether the method reads single rows or columns ([`Transport::entries`]).
+    pub fn needs_entries(self) -> bool {
+        matches!(self, Method::GaussSeidel | Method::Progressive)
+    }
+}
+
 /// Solves `system` on `transport` from `initial` (or zero), reporting each iteration.
 pub fn solve(
     transport: &dyn Transport,
@@ -121,24 +133,28 @@ pub fn solve(
     settings: &SolverSettings,
     initial: Option<&[Rgb]>,
     progress: &(dyn Fn(Progress) + Sync),
-) -> SolveOutcome {
-    let n = transport.patch_count();
+) -> Result<SolveOutcome, NeedsEntries> {
+    let (n, entries) = (transport.patch_count(), transport.entries());
+    if settings.method.needs_entries() && entries.is_none() {
+        return Err(NeedsEntries(settings.method));
+    }
     let mut radiosity = initial.map(<[Rgb]>::to_vec).unwrap_or_else(|| vec![Rgb::ZERO; n]);
     let emission_norm = system.weighted_norm(system.emission);
     if emission_norm == 0.0 {
         // No light: the answer is exactly zero, not 0/0.
-        return SolveOutcome { radiosity: vec![Rgb::ZERO; n], iterations: 0, residual: 0.0, converged: true };
+        return Ok(SolveOutcome { radiosity: vec![Rgb::ZERO; n], iterations: 0, residual: 0.0, converged: true });
     }
     let mut run = Run { transport, system, settings, emission_norm, progress };
-    let (iterations, residual) = match settings.method {
-        Method::Jacobi => run.jacobi(&mut radiosity),
-        Method::GaussSeidel => run.gauss_seidel(&mut radiosity),
-        Method::Progressive => run.progressive(&mut radiosity),
-        Method::Gmres => run.gmres(&mut radiosity),
+    let (iterations, residual) = match (settings.method, entries) {
+        (Method::GaussSeidel, Some(entries)) => run.gauss_seidel(entries, &mut radiosity),
+        (Method::Progressive, Some(entries)) => run.progressive(entries, &mut radiosity),
+        (Method::Jacobi, _) => run.jacobi(&mut radiosity),
+        // GMRES; a per-patch method without entries was refused above.
+        _ => run.gmres(&mut radiosity),
     };
     // The exact solution is a sum of non-negative terms; clamp round-off below zero.
     radiosity.iter_mut().for_each(|b| *b = b.max(Rgb::ZERO));
-    SolveOutcome { radiosity, iterations, residual, converged: residual <= settings.tolerance }
+    Ok(SolveOutcome { radiosity, iterations, residual, converged: residual <= settings.tolerance })
 }
 
 /// Channel-wise `x / y`, zero where `y` is zero (a channel with no light, or a converged one).
@@ -193,7 +209,7 @@ impl Run<'_> {
         }
     }
 
-    fn gauss_seidel(&mut self, radiosity: &mut [Rgb]) -> (usize, f64) {
+    fn gauss_seidel(&mut self, entries: &dyn Entries, radiosity: &mut [Rgb]) -> (usize, f64) {
         let (system, omega) = (self.system, self.settings.relaxation);
         let mut r = vec![Rgb::ZERO; radiosity.len()];
         let mut iteration = 0;
@@ -203,14 +219,14 @@ impl Run<'_> {
                 return (iteration, residual);
             }
             for i in 0..radiosity.len() {
-                let updated = system.emission[i] + system.reflectance[i] * self.transport.gather_row(i, radiosity);
+                let updated = system.emission[i] + system.reflectance[i] * entries.gather_row(i, radiosity);
                 radiosity[i] += (updated - radiosity[i]) * omega;
             }
             iteration += 1;
         }
     }
 
-    fn progressive(&mut self, radiosity: &mut [Rgb]) -> (usize, f64) {
+    fn progressive(&mut self, entries: &dyn Entries, radiosity: &mut [Rgb]) -> (usize, f64) {
         let system = self.system;
         // Southwell iteration: r is kept equal to the true residual, so shooting patch j's
         // unshot radiosity r_j adds rho_i F_ij r_j to every other residual.
@@ -231,7 +247,7 @@ impl Run<'_> {
             }
             let unshot = std::mem::take(&mut r[shooter]);
             radiosity[shooter] += unshot;
-            self.transport.for_each_in_column(shooter, &mut |i, f| r[i] += system.reflectance[i] * unshot * f);
+            entries.for_each_in_column(shooter, &mut |i, f| r[i] += system.reflectance[i] * unshot * f);
             iteration += 1;
         }
     }

@@ -9,9 +9,41 @@ use solver::accuracy::evaluate;
 use solver::reference::{Reference, place_probes, trace_probes};
 use solver::visibility::Occluders;
 use solver::{FormFactorSettings, Method, PatchTarget, Progress, Scene, SolveReport, SolveRequest, SolverSettings, solve_file};
+use solver::HierarchySettings;
 use std::path::PathBuf;
+use std::str::FromStr;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
+
+/// Counts heap bytes, so that reports can give their peak.
+#[global_allocator]
+static HEAP: peak_alloc::PeakAlloc = peak_alloc::PeakAlloc;
+
+/// `--method`: a solver on the dense matrix, or hierarchical radiosity (solved with GMRES).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum MethodChoice {
+    Dense(Method),
+    Hierarchical,
+}
+
+impl FromStr for MethodChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "hierarchical" {
+            return Ok(MethodChoice::Hierarchical);
+        }
+        s.parse().map(MethodChoice::Dense).map_err(|e: String| e.replace("(expected one of: ", "(expected hierarchical or one of: "))
+    }
+}
+
+impl std::fmt::Display for MethodChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MethodChoice::Dense(method) => method.fmt(f),
+            MethodChoice::Hierarchical => f.write_str("hierarchical"),
+        }
+    }
+}
 
 /// Radiosity for Wavefront OBJ + MTL scenes (Kd = reflectance, Ke = emitted radiosity).
 #[derive(Parser)]
@@ -89,9 +121,13 @@ struct Settings {
     /// Target patch edge length in scene units (instead of --patches).
     #[arg(long)]
     patch_size: Option<f64>,
-    /// Solver: jacobi, gauss-seidel, progressive or gmres.
+    /// Solver on a uniform mesh with a dense matrix (jacobi, gauss-seidel, progressive, gmres),
+    /// or hierarchical: adaptive elements and links, solved with GMRES (--error sets accuracy).
     #[arg(long, default_value = "gmres")]
-    method: Method,
+    method: MethodChoice,
+    /// With --method hierarchical: the relative error a link may carry; smaller refines more.
+    #[arg(long, default_value_t = HierarchySettings::default().error)]
+    error: f64,
     /// Stop when the relative residual is at most this.
     #[arg(long, default_value_t = 1e-6)]
     tolerance: f64,
@@ -120,6 +156,9 @@ impl Settings {
         if !(self.omega > 0.0 && self.omega < 2.0) {
             bail!("--omega must be in (0, 2), got {}", self.omega);
         }
+        if !(self.error > 0.0 && self.error < 1.0) {
+            bail!("--error must be in (0, 1), got {}", self.error);
+        }
         if self.rays == 0 || self.rays > MAX_RAYS_PER_PAIR {
             bail!("--rays must be in 1..={MAX_RAYS_PER_PAIR}, got {}", self.rays);
         }
@@ -127,11 +166,15 @@ impl Settings {
             patches,
             form_factors: FormFactorSettings { rays_per_pair: self.rays },
             solver: SolverSettings {
-                method: self.method,
+                method: match self.method {
+                    MethodChoice::Dense(method) => method,
+                    MethodChoice::Hierarchical => Method::Gmres,
+                },
                 tolerance: self.tolerance,
                 max_iterations: self.max_iterations,
                 relaxation: self.omega,
             },
+            hierarchy: (self.method == MethodChoice::Hierarchical).then_some(HierarchySettings { error: self.error, ..HierarchySettings::default() }),
             ..SolveRequest::default()
         })
     }
@@ -193,6 +236,7 @@ fn main() -> anyhow::Result<()> {
             }
             if json {
                 let mut value = serde_json::to_value(report).context("serialising the report")?;
+                value["peak_memory_bytes"] = HEAP.peak_usage().into();
                 if let Some(error) = error {
                     value["error"] = serde_json::to_value(error)?;
                 }
@@ -241,6 +285,13 @@ fn print_summary(scene: &std::path::Path, r: &SolveReport) {
     let s = &r.seconds;
     println!("scene       {} ({} objects, {} triangles)", scene.display(), r.objects.len(), r.triangles);
     println!("patches     {}  ({} shadow rays)", r.patches, r.rays);
+    if let Some(h) = &r.hierarchy {
+        println!(
+            "hierarchy   {} links ({:.1} per leaf), {} clusters, {} rounds, {} links decided by the shaft alone",
+            h.links, h.links as f64 / h.elements.max(1) as f64, h.clusters, h.rounds, h.shaft_decided
+        );
+    }
+    println!("peak heap   {:.1} MB", HEAP.peak_usage() as f64 / 1e6);
     println!("solver      {}: {} iterations, residual {:.2e}{}", r.method, r.iterations, r.residual, if r.converged { "" } else { " (NOT converged)" });
     println!(
         "seconds     load {:.3}  mesh {:.3}  form factors {:.3}  solve {:.3}  total {:.3}",
