@@ -7,8 +7,9 @@
 //!   similar triangles), split only when a link asks for it.
 //! - **Clusters** (Smits, Arvo, Greenberg 1994; Sillion 1995): a binary tree of median splits
 //!   over the input faces sits above them, so refinement starts from one self-link of the root,
-//!   not from faces^2 links. A kept cluster link carries the sampled area-average kernel, and a
-//!   receiving cluster passes its irradiance to everything below it (isotropic clusters).
+//!   not from faces^2 links: a face gathers from whole clusters while they are far enough. A
+//!   cluster link carries the sampled area-average kernel. Clusters only send: a receiving
+//!   cluster would hand its irradiance to faces that cannot see the source.
 //! - **Refinement** (BF with visibility): a link is kept when the radiosity error it can carry,
 //!   `rho_R (B_S dF + F dB_S)`, is within the tolerance; else its larger end is split. `dF` is
 //!   the spread of the factor over the receiver: the whole factor when visibility is partial or
@@ -39,9 +40,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// The one accuracy knob of the hierarchical path.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HierarchySettings {
-    /// Relative error: links are refined until `rho_R (B_S dF + F dB_S)` is at most
-    /// [`LINK_SHARE`] `* error` times the scene's mean radiosity, and elements stop splitting at a
-    /// radius of [`MIN_RADIUS_PER_ERROR`] `* error` times the scene's diagonal.
+    /// Relative error: links are refined until `rho_R (B_S dF + F dB_S)` is at most `error`
+    /// times the scene's mean reflected radiosity, and elements stop
+    /// splitting at [`MIN_RADIUS_PER_ERROR`] `* error` times their input face's radius.
     pub error: f64,
     /// Refinement-and-solve rounds at most (each refines on the newest solution).
     pub max_rounds: usize,
@@ -53,15 +54,11 @@ impl Default for HierarchySettings {
     }
 }
 
-/// Smallest element radius, as a fraction of `error` times the scene's diagonal. Chosen by
-/// measurement on the Cornell box and the shadow slab (docs/BENCHMARKS.md): 0.05 spent most
-/// leaves on contact lines for little RMS; 0.3 left the Cornell box's contact lines too coarse.
-pub const MIN_RADIUS_PER_ERROR: f64 = 0.2;
-
-/// Share of `error` one link may carry: a leaf sums 5-20 links, and their errors add up (1.0
-/// left the floor under the Cornell blocks lit by coarse links; 0.1 tripled the links for 0.5%
-/// less RMS).
-pub const LINK_SHARE: f64 = 0.3;
+/// Smallest element radius, as a fraction of `error` times its input face's radius (relative to
+/// the face, so that a lamp far above a floor does not coarsen the floor's shadows). Chosen by
+/// measurement on the Cornell box and the shadow slab (docs/BENCHMARKS.md): 0.5 spent most
+/// leaves on contact lines for little RMS; 2 left contact lines and shadow edges too coarse.
+pub const MIN_RADIUS_PER_ERROR: f64 = 1.0;
 
 /// Corners of elements are points of a per-face lattice with this many steps per side, so that
 /// elements of one face share corners exactly, whatever their level.
@@ -82,6 +79,8 @@ struct Element {
     /// Lattice coordinates of the corners: `(u, v)` on a quad, `(s, t)` on a triangle.
     lattice: [[u32; 2]; 4],
     depth: u32,
+    /// Bounding radius of the whole input face: the smallest element is relative to it.
+    face_radius: f64,
 }
 
 /// A node of the hierarchy: an element (of a face) or a cluster (of faces).
@@ -313,7 +312,8 @@ struct Refiner<'a> {
     spread: Vec<f64>,
     /// Largest radiosity error a link may carry, W/m^2.
     tolerance: f64,
-    min_radius: f64,
+    /// Smallest element radius as a fraction of its face's.
+    smallest: f64,
     rays_cast: AtomicU64,
     shaft_decided: AtomicU64,
 }
@@ -328,11 +328,18 @@ impl Refiner<'_> {
         if receiver == source {
             return if r.element.is_none() { Decision::SplitBoth } else { Decision::Drop };
         }
+        // Clusters gather nothing themselves: one that received would hand the same irradiance
+        // to every face below it, including faces that cannot see the source (light leaked
+        // through a wall whose two sides share a cluster). Links end at elements, and clusters
+        // only send.
+        if r.element.is_none() {
+            return Decision::SplitReceiver;
+        }
         let Some(estimate) = self.estimate(receiver, source) else { return Decision::Drop };
         if estimate.visibility == Visibility::Hidden {
             return Decision::Drop;
         }
-        match split_side(r, s, self.errors(receiver, source, estimate.factor, estimate.spread), self.tolerance, self.min_radius) {
+        match split_side(r, s, self.errors(receiver, source, estimate.factor, estimate.spread), self.tolerance, self.smallest) {
             Some(true) => return Decision::SplitReceiver,
             Some(false) => return Decision::SplitSource,
             None => {}
@@ -534,7 +541,7 @@ impl Hierarchy {
                 let patch = Patch { polygon: f.polygon, corners: [0; 4], face, object: f.object, area: 0.0, centroid: DVec3::ZERO, normal: f.polygon.normal(), radius: 0.0, reflectance: f.reflectance, emission: f.emission };
                 let s = LATTICE_STEPS;
                 let lattice = if f.polygon.is_quad() { [[0, 0], [s, 0], [s, s], [0, s]] } else { [[0, 0], [s, 0], [0, s], [0, s]] };
-                nodes[index as usize] = element_node(Element { patch, lattice, depth: 0 }, parent, faces);
+                nodes[index as usize] = element_node(Element { patch, lattice, depth: 0, face_radius: f.polygon.radius() }, parent, faces);
                 face_node[face as usize] = index;
                 continue;
             }
@@ -624,7 +631,7 @@ impl Hierarchy {
             let p = lattice.map(|at| lattice_point(face, at));
             let polygon = if face.is_quad() { Polygon::quad(p[0], p[1], p[2], p[3]) } else { Polygon::triangle(p[0], p[1], p[2]) };
             let patch = Patch { polygon, ..element.patch };
-            self.nodes.push(element_node(Element { patch, lattice, depth: element.depth + 1 }, n, faces.clone()));
+            self.nodes.push(element_node(Element { patch, lattice, depth: element.depth + 1, face_radius: element.face_radius }, n, faces.clone()));
         }
         let node = &mut self.nodes[n as usize];
         node.first_child = first;
@@ -650,11 +657,11 @@ impl Hierarchy {
 
     /// Links from `pending` pairs, refined until every kept one is accurate enough.
     fn refine(&mut self, refiner_state: (Vec<f64>, Vec<f64>, f64, f64), occluders: &Occluders, rays: FormFactorSettings, mut pending: Vec<(u32, u32)>) -> (u64, u64) {
-        let (radiosity, spread, tolerance, min_radius) = refiner_state;
+        let (radiosity, spread, tolerance, smallest) = refiner_state;
         let (mut radiosity, mut spread) = (radiosity, spread);
         let (mut rays_cast, mut shaft_decided) = (0, 0);
         while !pending.is_empty() {
-            let refiner = Refiner { hierarchy: self, occluders, rays, radiosity, spread, tolerance, min_radius, rays_cast: AtomicU64::new(0), shaft_decided: AtomicU64::new(0) };
+            let refiner = Refiner { hierarchy: self, occluders, rays, radiosity, spread, tolerance, smallest, rays_cast: AtomicU64::new(0), shaft_decided: AtomicU64::new(0) };
             let decisions: Vec<Decision> = pending.par_iter().map(|&(r, s)| refiner.decide(r, s)).collect();
             rays_cast += refiner.rays_cast.into_inner();
             shaft_decided += refiner.shaft_decided.into_inner();
@@ -838,8 +845,7 @@ impl Hierarchy {
             .map(|(face, &n)| sees_closed_view(&hierarchy.nodes[n as usize].element.as_ref().expect("faces are elements").patch, face, occluders))
             .collect();
         hierarchy.index();
-        let diagonal = scene.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length());
-        let min_radius = MIN_RADIUS_PER_ERROR * settings.error * diagonal;
+        let smallest = MIN_RADIUS_PER_ERROR * settings.error;
         // First estimate: emission plus an ambient term (Cohen et al. 1988): the emitted power
         // spread over all area, reflected by the mean reflectance.
         let (mut power, mut reflected, mut total_area) = (Rgb::ZERO, Rgb::ZERO, 0.0);
@@ -858,7 +864,7 @@ impl Hierarchy {
                 radiosity = solved.radiosity;
             }
             let (node_radiosity, node_spread) = hierarchy.node_radiosity(&radiosity);
-            let tolerance = LINK_SHARE * settings.error * mean_radiosity(&hierarchy, &radiosity);
+            let tolerance = settings.error * mean_reflected(&hierarchy, &radiosity);
             if round > 0 {
                 // Links that the new solution shows too coarse go back to refinement; only
                 // those that can still be split count as changes.
@@ -867,7 +873,7 @@ impl Hierarchy {
                     let (rho, s) = (node(link.receiver).reflectance, link.source as usize);
                     (rho * node_radiosity[s] * link.spread as f64, rho * link.factor as f64 * node_spread[s])
                 };
-                let (redo, keep): (Vec<Link>, Vec<Link>) = hierarchy.links.par_iter().partition(|l| split_side(node(l.receiver), node(l.source), errors(l), tolerance, min_radius).is_some());
+                let (redo, keep): (Vec<Link>, Vec<Link>) = hierarchy.links.par_iter().partition(|l| split_side(node(l.receiver), node(l.source), errors(l), tolerance, smallest).is_some());
                 if redo.is_empty() {
                     break;
                 }
@@ -875,7 +881,7 @@ impl Hierarchy {
                 pending = redo.iter().map(|l| (l.receiver, l.source)).collect();
             }
             let (before, mut inherited) = (hierarchy.nodes.len(), hierarchy.pull(&radiosity));
-            let (rays_cast, shaft_decided) = hierarchy.refine((node_radiosity, node_spread, tolerance, min_radius), occluders, rays, std::mem::take(&mut pending));
+            let (rays_cast, shaft_decided) = hierarchy.refine((node_radiosity, node_spread, tolerance, smallest), occluders, rays, std::mem::take(&mut pending));
             hierarchy.stats.rays += rays_cast;
             hierarchy.stats.shaft_decided += shaft_decided;
             hierarchy.stats.rounds = round + 1;
@@ -891,11 +897,12 @@ impl Hierarchy {
     }
 }
 
-/// Area-weighted mean of the largest channel over the leaves.
-fn mean_radiosity(hierarchy: &Hierarchy, radiosity: &[Rgb]) -> f64 {
+/// Area-weighted mean over the leaves of the largest channel of reflected radiosity (`B - E`):
+/// the scale errors are measured against, which a small bright lamp does not inflate.
+fn mean_reflected(hierarchy: &Hierarchy, radiosity: &[Rgb]) -> f64 {
     let (sum, area) = radiosity.iter().enumerate().fold((0.0, 0.0), |(sum, area), (i, b)| {
-        let a = hierarchy.leaf_patch(i).area;
-        (sum + b.max_element() * a, area + a)
+        let patch = hierarchy.leaf_patch(i);
+        (sum + (*b - patch.emission).max(Rgb::ZERO).max_element() * patch.area, area + patch.area)
     });
     if area > 0.0 { sum / area } else { 0.0 }
 }
@@ -907,8 +914,8 @@ fn mean_radiosity(hierarchy: &Hierarchy, radiosity: &[Rgb]) -> f64 {
 /// with the larger error splits, or the other if that one is at the smallest size and its own
 /// error still exceeds the `tolerance`. With a cluster at either end, whose factor is only a
 /// bound or a sample, the larger end is split.
-fn split_side(r: &Node, s: &Node, (receiver_error, source_error): (f64, f64), tolerance: f64, min_radius: f64) -> Option<bool> {
-    let can_split = |n: &Node| n.element.as_ref().is_none_or(|e| n.radius > min_radius && e.depth < MAX_DEPTH);
+fn split_side(r: &Node, s: &Node, (receiver_error, source_error): (f64, f64), tolerance: f64, smallest: f64) -> Option<bool> {
+    let can_split = |n: &Node| n.element.as_ref().is_none_or(|e| n.radius > smallest * e.face_radius && e.depth < MAX_DEPTH);
     if receiver_error + source_error <= tolerance {
         return None;
     }
