@@ -5,6 +5,7 @@
 
 pub mod accuracy;
 pub mod form_factors;
+pub mod generate;
 pub mod geometry;
 pub mod hierarchy;
 pub mod mesh;

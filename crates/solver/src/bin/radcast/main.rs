@@ -86,6 +86,18 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Write a generated scene (OBJ + MTL beside it): a furnished room for scaling tests.
+    Generate {
+        /// Pieces of furniture (tables, chairs, cabinets; about 14 faces each).
+        #[arg(long, default_value_t = 1000)]
+        pieces: usize,
+        /// Seed: the same seed gives the same room.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Where to write the OBJ; the MTL goes beside it with the same stem.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Time every stage at several patch counts and print a Markdown table of medians; with
     /// --error, sweep configurations against each scene's reference and write
     /// docs/speed-vs-error.md and .svg.
@@ -262,6 +274,18 @@ fn main() -> anyhow::Result<()> {
             let reference = Reference { command, seed, samples, probes: traced };
             std::fs::write(&out, serde_json::to_string_pretty(&reference)?).with_context(|| format!("{}: cannot write", out.display()))?;
             eprintln!("wrote {} ({} probes x {samples} paths)", out.display(), probes);
+        }
+        Command::Generate { pieces, seed, out } => {
+            let mtl_path = out.with_extension("mtl");
+            let mtl_name = mtl_path.file_name().and_then(|n| n.to_str()).context("--out needs a file name")?;
+            let scene = solver::generate::furnished_room(pieces, seed, mtl_name);
+            if let Some(folder) = out.parent().filter(|f| !f.as_os_str().is_empty()) {
+                std::fs::create_dir_all(folder).with_context(|| format!("{}: cannot create", folder.display()))?;
+            }
+            std::fs::write(&out, &scene.obj).with_context(|| format!("{}: cannot write", out.display()))?;
+            std::fs::write(&mtl_path, &scene.mtl).with_context(|| format!("{}: cannot write", mtl_path.display()))?;
+            let loaded = Scene::load_obj(&out)?;
+            eprintln!("wrote {} and {}: {} objects, {} faces ({} triangles)", out.display(), mtl_path.display(), loaded.objects.len(), loaded.faces.len(), loaded.triangle_count());
         }
         Command::Bench { scenes, error: true, counts, repeat, sweep_rays, out_dir, .. } => {
             let command = format!(

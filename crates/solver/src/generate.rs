@@ -1,0 +1,136 @@
+//! Generated scenes for scaling measurements: a furnished room with as many pieces of
+//! furniture as asked, as OBJ + MTL text. The generator ships instead of large files.
+
+use glam::{DVec3, dvec3};
+use rand_core::{RngCore, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+use std::fmt::Write;
+
+/// A scene as the two files that describe it.
+pub struct GeneratedScene {
+    /// The OBJ text; it names its MTL file `mtl_name`.
+    pub obj: String,
+    /// The MTL text.
+    pub mtl: String,
+}
+
+/// Materials: diffuse reflectance (`Kd`) and emitted radiosity (`Ke`, W/m^2).
+const MATERIALS: [(&str, [f64; 3], [f64; 3]); 8] = [
+    ("plaster", [0.75, 0.73, 0.70], [0.0; 3]),
+    ("floorboards", [0.45, 0.32, 0.20], [0.0; 3]),
+    ("oak", [0.55, 0.40, 0.25], [0.0; 3]),
+    ("walnut", [0.30, 0.20, 0.13], [0.0; 3]),
+    ("fabric_red", [0.60, 0.12, 0.10], [0.0; 3]),
+    ("fabric_blue", [0.12, 0.20, 0.55], [0.0; 3]),
+    ("metal", [0.62, 0.62, 0.65], [0.0; 3]),
+    ("lamp", [0.8, 0.8, 0.8], [20.0, 18.0, 15.0]),
+];
+
+/// Room height, metres.
+const HEIGHT: f64 = 3.0;
+/// Floor space per piece of furniture, metres along each side.
+const CELL: f64 = 1.5;
+
+struct Writer {
+    obj: String,
+    rng: Pcg64Mcg,
+}
+
+impl Writer {
+    fn unit(&mut self) -> f64 {
+        (self.rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn between(&mut self, low: f64, high: f64) -> f64 {
+        low + (high - low) * self.unit()
+    }
+
+    fn object(&mut self, name: &str, material: &str) {
+        // Writing to a String cannot fail.
+        let _ = write!(self.obj, "o {name}\nusemtl {material}\n");
+    }
+
+    /// The parallelogram `origin, origin + u, origin + u + v, origin + v`, front `u x v`.
+    fn quad(&mut self, origin: DVec3, u: DVec3, v: DVec3) {
+        for p in [origin, origin + u, origin + u + v, origin + v] {
+            let _ = writeln!(self.obj, "v {:.4} {:.4} {:.4}", p.x, p.y, p.z);
+        }
+        self.obj.push_str("f -4 -3 -2 -1\n");
+    }
+
+    /// An axis-aligned box from `lo` to `hi` with outward faces; the bottom only if it floats.
+    fn cuboid(&mut self, lo: DVec3, hi: DVec3) {
+        let size = hi - lo;
+        let (x, y, z) = (DVec3::X * size.x, DVec3::Y * size.y, DVec3::Z * size.z);
+        self.quad(lo + y, z, x);
+        self.quad(lo, z, y);
+        self.quad(lo + x, y, z);
+        self.quad(lo, y, x);
+        self.quad(lo + z, x, y);
+        if lo.y > 0.0 {
+            self.quad(lo, x, z);
+        }
+    }
+}
+
+/// A closed room with `pieces` pieces of furniture (tables, chairs, cabinets) on a grid, lit by
+/// a grid of ceiling lamps; the same `seed` gives the same room. The OBJ refers to `mtl_name`.
+pub fn furnished_room(pieces: usize, seed: u64, mtl_name: &str) -> GeneratedScene {
+    let per_side = (pieces as f64).sqrt().ceil().max(1.0) as usize;
+    let side = per_side as f64 * CELL + 2.0;
+    let mut w = Writer { obj: String::new(), rng: Pcg64Mcg::seed_from_u64(seed) };
+    let _ = writeln!(w.obj, "# radcast generate --pieces {pieces} --seed {seed}: a furnished room, {side:.1} x {side:.1} x {HEIGHT} m\nmtllib {mtl_name}");
+    let (x, y, z) = (DVec3::X * side, DVec3::Y * HEIGHT, DVec3::Z * side);
+    w.object("floor", "floorboards");
+    w.quad(DVec3::ZERO, z, x);
+    w.object("ceiling", "plaster");
+    w.quad(y, x, z);
+    w.object("walls", "plaster");
+    w.quad(DVec3::ZERO, y, z);
+    w.quad(x, z, y);
+    w.quad(DVec3::ZERO, x, y);
+    w.quad(z, y, x);
+    // One 0.6 m lamp per 4 x 4 m of ceiling, 1 cm below it, facing down.
+    let lamps = (side / 4.0).round().max(1.0) as usize;
+    for i in 0..lamps {
+        for j in 0..lamps {
+            let centre = dvec3((i as f64 + 0.5) * side / lamps as f64, HEIGHT - 0.01, (j as f64 + 0.5) * side / lamps as f64);
+            w.object(&format!("lamp_{i}_{j}"), "lamp");
+            w.quad(centre - dvec3(0.3, 0.0, 0.3), DVec3::X * 0.6, DVec3::Z * 0.6);
+        }
+    }
+    for piece in 0..pieces {
+        let cell = dvec3(1.0 + (piece % per_side) as f64 * CELL, 0.0, 1.0 + (piece / per_side) as f64 * CELL);
+        let (width, depth) = (w.between(0.4, 1.2), w.between(0.4, 1.2));
+        let corner = cell + dvec3(w.between(0.0, CELL - width), 0.0, w.between(0.0, CELL - depth));
+        let wood = if w.unit() < 0.5 { "oak" } else { "walnut" };
+        match w.rng.next_u32() % 3 {
+            0 => {
+                w.object(&format!("table_{piece}"), wood);
+                let top = w.between(0.7, 0.8);
+                w.cuboid(corner + DVec3::Y * top, corner + dvec3(width, top + 0.04, depth));
+                for (dx, dz) in [(0.0, 0.0), (width - 0.05, 0.0), (0.0, depth - 0.05), (width - 0.05, depth - 0.05)] {
+                    w.cuboid(corner + dvec3(dx, 0.0, dz), corner + dvec3(dx + 0.05, top, dz + 0.05));
+                }
+            }
+            1 => {
+                let fabric = if w.unit() < 0.5 { "fabric_red" } else { "fabric_blue" };
+                w.object(&format!("chair_{piece}"), fabric);
+                let (seat, size) = (0.45, width.min(depth).min(0.6));
+                w.cuboid(corner, corner + dvec3(size, seat, size));
+                w.cuboid(corner + dvec3(0.0, seat, 0.0), corner + dvec3(size, seat + 0.5, 0.08));
+            }
+            _ => {
+                let finish = if w.unit() < 0.5 { "metal" } else { wood };
+                w.object(&format!("cabinet_{piece}"), finish);
+                let height = w.between(0.8, 2.2);
+                w.cuboid(corner, corner + dvec3(width, height, depth.min(0.6)));
+            }
+        }
+    }
+    let mut mtl = String::from("# radcast generate: materials of the furnished room\n");
+    for (name, kd, ke) in MATERIALS {
+        let _ = writeln!(mtl, "newmtl {name}\nKd {} {} {}\nKe {} {} {}\n", kd[0], kd[1], kd[2], ke[0], ke[1], ke[2]);
+    }
+    GeneratedScene { obj: w.obj, mtl }
+}
