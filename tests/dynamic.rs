@@ -4,7 +4,7 @@
 use futures_util::StreamExt;
 use server::solving::{prepare, serve_edits, shared_for, solve_and_publish};
 use server::{Limits, Shared, routes};
-use solver::{PatchTarget, Rgb, SolveRequest};
+use solver::{MethodChoice, PatchTarget, Rgb, SolveRequest};
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
@@ -29,7 +29,11 @@ impl Drop for EditLoop {
 }
 
 async fn live_cornell() -> (SocketAddr, Arc<Shared>, EditLoop) {
-    let prepared = prepare("scenes/cornell-box.obj".as_ref(), request()).unwrap();
+    live("scenes/cornell-box.obj", request()).await
+}
+
+async fn live(scene: &str, request: SolveRequest) -> (SocketAddr, Arc<Shared>, EditLoop) {
+    let prepared = prepare(scene.as_ref(), request).unwrap();
     let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let address = listener.local_addr().unwrap();
@@ -255,5 +259,34 @@ async fn moving_an_object_sends_new_geometry_and_colours_of_the_moved_scene() {
     mesh.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
     let (expected, _) = solver::solve_mesh(&moved_scene, &mesh, &request(), &solver::no_progress).unwrap();
     let expected: Vec<[f32; 3]> = expected.iter().map(|b| b.as_vec3().to_array()).collect();
+    assert_eq!(mismatch(&viewer.buffer, &expected), None);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_hierarchical_server_streams_its_leaves_and_new_leaves_after_a_move() {
+    let hierarchical = || SolveRequest::default().with_method(MethodChoice::Hierarchical, 0.2);
+    let solve = |scene: solver::Scene| {
+        let solved = solver::solve_scene(scene, &hierarchical(), &solver::no_progress).unwrap();
+        (solved.mesh.patches.len(), solved.radiosity.iter().map(|b| b.as_vec3().to_array()).collect::<Vec<[f32; 3]>>())
+    };
+    let (address, _, _edit_loop) = live("scenes/cornell-box.obj", hierarchical()).await;
+    let mut viewer = Viewer::connect(address).await;
+    viewer.wait_for(|_| true).await;
+    let scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+    let (leaves, expected) = solve(scene.clone());
+    assert_eq!(viewer.buffer.colours.len(), leaves, "one code per leaf");
+    assert_eq!(mismatch(&viewer.buffer, &expected), None);
+    // A move rebuilds the hierarchy: new leaves, announced as a new geometry, then their colours.
+    let before_version = viewer.version();
+    let (status, body) = put(address, "/api/objects/short_block/transform", Some(TOKEN), r#"{"translate": [40, 0, -30]}"#).await;
+    assert_eq!(status, 202, "{body}");
+    viewer.wait_for(|b| b.info.unwrap().solution_version > before_version).await;
+    assert_eq!(viewer.geometry_versions, [2]);
+    let mut moved = scene.clone();
+    let block = scene.objects.iter().position(|o| o.name == "short_block").unwrap() as u32;
+    moved.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
+    let (leaves, expected) = solve(moved);
+    let geometry = tokio::task::spawn_blocking(move || client::fetch_geometry(&format!("http://{address}")).unwrap()).await.unwrap();
+    assert_eq!((geometry.patches.len(), viewer.buffer.colours.len()), (leaves, leaves));
     assert_eq!(mismatch(&viewer.buffer, &expected), None);
 }

@@ -95,7 +95,7 @@ impl Hub {
         self.geometry.read().expect("geometry lock").clone()
     }
 
-    /// Replaces the geometry (same patches, moved) and returns its new version; frames
+    /// Replaces the geometry (the patches moved, or new leaves of a hierarchy) and returns its new version; frames
     /// published from now on carry it, and viewers are told before their next frame.
     pub fn replace_geometry(&self, geometry: Geometry) -> u64 {
         let mut current = self.geometry.write().expect("geometry lock");
@@ -106,7 +106,8 @@ impl Hub {
 
     fn frames(version: u64, is_final: bool, scale: f32, colours: Vec<u32>, previous: Option<&Published>, geometry_version: u64) -> Published {
         let info = FrameInfo { solution_version: version, sent_at_unix_micros: now_micros(), scale, patch_count: colours.len() as u32, is_final };
-        let delta = previous.filter(|p| p.scale == scale).map(|p| {
+        // A delta needs the same scale and the same patches (a hierarchy's leaves change on a move).
+        let delta = previous.filter(|p| p.scale == scale && p.colours.len() == colours.len()).map(|p| {
             let (indices, changed) = wire::changes(&p.colours, &colours);
             let frame = DeltaFrame { base_version: p.version, info, indices, colours: changed };
             (p.version, Bytes::from(ServerMessage::Delta(frame).encode()))

@@ -4,7 +4,7 @@ use anyhow::Context;
 use clap::Parser;
 use server::solving::{emitters, prepare, serve_edits, shared_for, solve_and_publish};
 use server::{Limits, routes};
-use solver::{FormFactorSettings, Method, PatchTarget, SolveRequest, SolverSettings};
+use solver::{FormFactorSettings, HierarchySettings, MethodChoice, PatchTarget, SolveRequest, SolverSettings};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -18,12 +18,16 @@ struct Args {
     /// Address to listen on.
     #[arg(long, env = "RADCAST_ADDR", default_value = "127.0.0.1:8080")]
     addr: String,
-    /// Target number of patches.
+    /// Target number of patches (dense methods).
     #[arg(long, env = "RADCAST_PATCHES", default_value_t = 1000)]
     patches: usize,
-    /// Solver: jacobi, gauss-seidel, progressive or gmres.
+    /// Solver on a uniform mesh (jacobi, gauss-seidel, progressive, gmres), or hierarchical:
+    /// refinement decides the patches (--error sets how finely).
     #[arg(long, env = "RADCAST_METHOD", default_value = "gmres")]
-    method: Method,
+    method: MethodChoice,
+    /// With --method hierarchical: the relative error a link may carry; smaller refines more.
+    #[arg(long, env = "RADCAST_ERROR", default_value_t = HierarchySettings::default().error)]
+    error: f64,
     /// Relative residual to stop at.
     #[arg(long, env = "RADCAST_TOLERANCE", default_value_t = 1e-6)]
     tolerance: f64,
@@ -72,12 +76,14 @@ async fn main() -> anyhow::Result<()> {
     let _ = rlimit::increase_nofile_limit(u64::MAX);
     anyhow::ensure!(args.patches > 0, "--patches must be at least 1");
     anyhow::ensure!(args.tolerance > 0.0 && args.tolerance < 1.0, "--tolerance must be in (0, 1), got {}", args.tolerance);
+    anyhow::ensure!(args.error > 0.0 && args.error < 1.0, "--error must be in (0, 1), got {}", args.error);
     let request = SolveRequest {
         patches: PatchTarget::Count(args.patches),
         form_factors: FormFactorSettings::default(),
-        solver: SolverSettings { method: args.method, tolerance: args.tolerance, ..SolverSettings::default() },
+        solver: SolverSettings { tolerance: args.tolerance, ..SolverSettings::default() },
         ..SolveRequest::default()
-    };
+    }
+    .with_method(args.method, args.error);
     let limits = Limits {
         max_viewers: args.max_viewers,
         max_viewers_per_ip: args.max_viewers_per_ip,

@@ -25,18 +25,38 @@ pub struct Prepared {
     pub scene_id: u64,
     /// The geometry viewers fetch.
     pub geometry: Geometry,
+    /// A hierarchy built to find the patches (its leaves), kept for the solve.
+    built: Mutex<Option<Session>>,
 }
 
 /// Progressive frames are published at most this often while the solver iterates.
 const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(100);
 
-/// Loads and meshes `scene_path`; fails with the loader's message on bad input.
+/// Loads and meshes `scene_path`; fails with the loader's message on bad input. The
+/// hierarchical path refines here, since its leaves are the patches viewers fetch.
 pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepared> {
     let scene = Scene::load_obj(scene_path)?;
-    let mesh = Mesh::build(&scene, request.patches);
     let scene_id = scene_id(scene_path, &request)?;
+    let (mesh, built) = match &request.hierarchy {
+        Some(settings) => {
+            let session = Session::hierarchical(&scene, settings, &request, &solver::no_progress)?;
+            (session.mesh().clone(), Some(session))
+        }
+        None => (Mesh::build(&scene, request.patches), None),
+    };
     let geometry = geometry_of(&scene, &mesh);
-    Ok(Prepared { scene, mesh, request, scene_id, geometry })
+    Ok(Prepared { scene, mesh, request, scene_id, geometry, built: Mutex::new(built) })
+}
+
+/// The session to solve with: the hierarchy `prepare` built, or form factors computed now.
+fn session_for(prepared: &Prepared, progress: &(dyn Fn(Progress) + Sync)) -> anyhow::Result<Session> {
+    if let Some(session) = prepared.built.lock().expect("session lock").take() {
+        return Ok(session);
+    }
+    Ok(match &prepared.request.hierarchy {
+        Some(settings) => Session::hierarchical(&prepared.scene, settings, &prepared.request, progress)?,
+        None => Session::new(&prepared.scene, &prepared.mesh, &prepared.request, progress)?,
+    })
 }
 
 /// First 8 bytes of SHA-256 over the OBJ, its MTL libraries, the settings and this version.
@@ -123,7 +143,9 @@ pub enum Solution {
 /// Blocking: run it on a blocking thread.
 pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option<&Path>) -> anyhow::Result<Solution> {
     let hub = &shared.hub;
-    let cache = cache_dir.map(|dir| (dir, cache_path(dir, prepared.scene_id)));
+    // A hierarchy is built before viewers connect (its leaves are the patches): a cached
+    // solution would save only its last solve.
+    let cache = cache_dir.filter(|_| prepared.request.hierarchy.is_none()).map(|dir| (dir, cache_path(dir, prepared.scene_id)));
     if let Some(cached) = cache.as_ref().and_then(|(_, path)| read_cache(path, prepared.mesh.patches.len())) {
         tracing::info!("solution read from the cache");
         hub.publish(&cached.radiosity, true);
@@ -140,7 +162,7 @@ pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option
             hub.publish(&to_f32(radiosity), false);
         }
     };
-    let mut session = Session::new(&prepared.scene, &prepared.mesh, &prepared.request, &progress)?;
+    let mut session = session_for(prepared, &progress)?;
     let report = session.solve(&progress);
     let radiosity = to_f32(session.radiosity());
     hub.publish(&radiosity, true);
@@ -164,7 +186,7 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, solution: Solution) -> 
             // Form factors are computed on the first edit only: a cached scene nobody edits
             // never pays for them.
             let Some(batch) = shared.edits.wait() else { return Ok(()) };
-            let mut session = Session::new(&prepared.scene, &prepared.mesh, &prepared.request, &solver::no_progress)?;
+            let mut session = session_for(prepared, &solver::no_progress)?;
             session.adopt_solution(radiosity.iter().map(|c| Rgb::new(c[0] as f64, c[1] as f64, c[2] as f64)).collect());
             apply(&mut session, shared, batch);
             session

@@ -134,3 +134,27 @@ pub fn furnished_room(pieces: usize, seed: u64, mtl_name: &str) -> GeneratedScen
     }
     GeneratedScene { obj: w.obj, mtl }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_same_seed_gives_the_same_room_and_another_seed_another() {
+        let a = furnished_room(50, 7, "room.mtl");
+        assert_eq!(a.obj, furnished_room(50, 7, "room.mtl").obj);
+        assert_ne!(a.obj, furnished_room(50, 8, "room.mtl").obj);
+        let pieces = ["table_", "chair_", "cabinet_"].iter().map(|kind| a.obj.matches(&format!("o {kind}")).count()).sum::<usize>();
+        assert_eq!(pieces, 50);
+    }
+
+    #[test]
+    fn every_piece_stands_inside_the_room() {
+        let room = furnished_room(40, 3, "room.mtl");
+        let side = (40f64.sqrt().ceil()) * CELL + 2.0;
+        for line in room.obj.lines().filter(|l| l.starts_with("v ")) {
+            let p: Vec<f64> = line[2..].split(' ').map(|x| x.parse().unwrap()).collect();
+            assert!(p[0] >= 0.0 && p[0] <= side && p[2] >= 0.0 && p[2] <= side && p[1] >= 0.0 && p[1] <= HEIGHT, "{line}");
+        }
+    }
+}

@@ -42,6 +42,46 @@ impl Default for SolveRequest {
     }
 }
 
+/// `--method` of the command-line tools: a solver on a dense matrix over a uniform mesh, or
+/// hierarchical radiosity (elements and links, solved with GMRES).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MethodChoice {
+    /// A uniform mesh and its dense form-factor matrix, solved with this method.
+    Dense(crate::solve::Method),
+    /// [`crate::hierarchy`].
+    Hierarchical,
+}
+
+impl std::str::FromStr for MethodChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "hierarchical" {
+            return Ok(MethodChoice::Hierarchical);
+        }
+        s.parse().map(MethodChoice::Dense).map_err(|e: String| e.replace("(expected one of: ", "(expected hierarchical or one of: "))
+    }
+}
+
+impl std::fmt::Display for MethodChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MethodChoice::Dense(method) => method.fmt(f),
+            MethodChoice::Hierarchical => f.write_str("hierarchical"),
+        }
+    }
+}
+
+impl SolveRequest {
+    /// This request solved by `choice`; `error` is the hierarchical path's knob.
+    pub fn with_method(self, choice: MethodChoice, error: f64) -> SolveRequest {
+        let (method, hierarchy) = match choice {
+            MethodChoice::Dense(method) => (method, None),
+            MethodChoice::Hierarchical => (crate::solve::Method::Gmres, Some(HierarchySettings { error, ..HierarchySettings::default() })),
+        };
+        SolveRequest { solver: SolverSettings { method, ..self.solver }, hierarchy, ..self }
+    }
+}
+
 /// Why a solve could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum SolveError {

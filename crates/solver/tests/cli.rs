@@ -48,9 +48,40 @@ fn bad_input_exits_non_zero_with_the_reason() {
     let output = radcast(&["solve", "scenes/cornell-box.obj", "--method", "magic"]);
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(stderr.contains("unknown method 'magic' (expected one of: jacobi, gauss-seidel, progressive, gmres)"), "{stderr}");
+    assert!(stderr.contains("unknown method 'magic' (expected hierarchical or one of: jacobi, gauss-seidel, progressive, gmres)"), "{stderr}");
 
     let output = radcast(&["solve", "scenes/cornell-box.obj", "--tolerance", "NaN"]);
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("--tolerance must be in (0, 1), got NaN"));
+
+    let output = radcast(&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--error", "0"]);
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("--error must be in (0, 1), got 0"));
+}
+
+#[test]
+fn hierarchical_json_adds_elements_links_and_peak_memory() {
+    let output = radcast(&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--error", "0.2", "--json"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).expect("one JSON object on stdout");
+    assert_eq!(report["method"], "hierarchical");
+    let (elements, links) = (report["elements"].as_u64().unwrap(), report["links"].as_u64().unwrap());
+    // The leaves are the patches; each input face is at least one.
+    assert_eq!(report["patches"].as_u64(), Some(elements));
+    assert!(elements >= 20 && links > elements, "{elements} leaves, {links} links");
+    assert!(report["peak_memory_bytes"].as_u64().unwrap() > 0);
+    assert!(report["residual"].as_f64().unwrap() <= 1e-6);
+}
+
+#[test]
+fn generate_writes_a_room_that_loads() {
+    let folder = std::env::temp_dir().join(format!("radcast-generate-{}", std::process::id()));
+    let out = folder.join("room.obj");
+    let output = radcast(&["generate", "--pieces", "30", "--seed", "5", "--out", out.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    // 30 pieces, floor, ceiling, walls and one lamp per 4 m of a 10.25 m square ceiling (3 x 3).
+    assert!(stderr.contains(": 42 objects,"), "{stderr}");
+    assert!(folder.join("room.mtl").exists());
+    std::fs::remove_dir_all(&folder).unwrap();
 }

@@ -5,7 +5,7 @@ use anyhow::{Context, bail};
 use plotters::prelude::*;
 use solver::accuracy::{SolutionError, evaluate};
 use solver::reference::Reference;
-use solver::{FormFactorSettings, Method, PatchTarget, Scene, SolveRequest, SolverSettings, solve_scene};
+use solver::{FormFactorSettings, HierarchySettings, Method, PatchTarget, Scene, SolveRequest, SolverSettings, solve_scene};
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -14,8 +14,12 @@ use std::time::Instant;
 struct Row {
     scene: String,
     patches: usize,
-    method: Method,
+    /// The solver, or `hierarchical E=...`.
+    method: String,
     rays: u32,
+    /// Links (hierarchical) or non-zero-capable entries n^2 (dense).
+    links: u64,
+    peak_bytes: usize,
     seconds: [f64; 4], // load + mesh, form factors, solve, total
     error: SolutionError,
     pareto: bool,
@@ -40,8 +44,9 @@ fn median(mut values: Vec<f64>) -> f64 {
     values[values.len() / 2]
 }
 
-/// Runs the sweep and writes `<out_dir>/speed-vs-error.{md,svg}`.
-pub fn run(scenes: &[PathBuf], counts: &[usize], rays: &[u32], repeat: usize, out_dir: &Path, command: &str) -> anyhow::Result<()> {
+/// Runs the sweep and writes `<out_dir>/speed-vs-error.{md,svg}`: dense GMRES at each count and
+/// ray setting, the other solvers at the middle count, and the hierarchical path at each knob.
+pub fn run(scenes: &[PathBuf], counts: &[usize], rays: &[u32], errors: &[f64], repeat: usize, out_dir: &Path, command: &str) -> anyhow::Result<()> {
     if scenes.is_empty() {
         bail!("name at least one scene");
     }
@@ -52,30 +57,40 @@ pub fn run(scenes: &[PathBuf], counts: &[usize], rays: &[u32], repeat: usize, ou
         let scene = Scene::load_obj(scene_path)?;
         let load = start.elapsed().as_secs_f64();
         let middle = counts[counts.len() / 2];
+        let dense = |count: usize, method: Method, rays_per_pair: u32| SolveRequest {
+            patches: PatchTarget::Count(count),
+            form_factors: FormFactorSettings { rays_per_pair },
+            solver: SolverSettings { method, ..SolverSettings::default() },
+            ..SolveRequest::default()
+        };
         // Mesh size and ray count decide the error; the method only the solve time.
-        let mut configurations: Vec<(usize, Method, u32)> = counts.iter().flat_map(|&n| rays.iter().map(move |&r| (n, Method::Gmres, r))).collect();
-        configurations.extend([Method::Jacobi, Method::GaussSeidel, Method::Progressive].map(|m| (middle, m, FormFactorSettings::default().rays_per_pair)));
-        for (count, method, ray_count) in configurations {
-            let request = SolveRequest {
-                patches: PatchTarget::Count(count),
-                form_factors: FormFactorSettings { rays_per_pair: ray_count },
-                solver: SolverSettings { method, ..SolverSettings::default() },
-                ..SolveRequest::default()
-            };
+        let mut configurations: Vec<SolveRequest> = counts.iter().flat_map(|&n| rays.iter().map(move |&r| dense(n, Method::Gmres, r))).collect();
+        configurations.extend([Method::Jacobi, Method::GaussSeidel, Method::Progressive].map(|m| dense(middle, m, FormFactorSettings::default().rays_per_pair)));
+        configurations.extend(errors.iter().map(|&error| SolveRequest { hierarchy: Some(HierarchySettings { error, ..HierarchySettings::default() }), ..SolveRequest::default() }));
+        for request in configurations {
             let mut runs = Vec::new();
+            let mut peak_bytes = 0;
             for _ in 0..repeat {
+                crate::HEAP.reset_peak_usage();
                 runs.push(solve_scene(scene.clone(), &request, &solver::no_progress)?);
+                peak_bytes = peak_bytes.max(crate::HEAP.peak_usage());
             }
             let stage = |f: fn(&solver::SolveReport) -> f64| median(runs.iter().map(|r| f(&r.report)).collect());
             let (mesh, ff, solve) = (stage(|r| r.seconds.mesh), stage(|r| r.seconds.form_factors), stage(|r| r.seconds.solve));
             let last = runs.last().context("one run")?;
             let error = evaluate(&last.scene, &last.mesh, &last.radiosity, &reference.probes);
-            eprintln!("{}: {} patches, {method}, {ray_count} rays: {:.3} s, smooth RMS {:.4}", scene_path.display(), last.report.patches, load + mesh + ff + solve, error.smooth.rms);
+            let (method, links) = match (&request.hierarchy, &last.report.hierarchy) {
+                (Some(settings), Some(stats)) => (format!("hierarchical E={}", settings.error), stats.links as u64),
+                _ => (request.solver.method.to_string(), (last.report.patches as u64).pow(2)),
+            };
+            eprintln!("{}: {} patches, {method}, {} rays: {:.3} s, smooth RMS {:.4}", scene_path.display(), last.report.patches, request.form_factors.rays_per_pair, load + mesh + ff + solve, error.smooth.rms);
             rows.push(Row {
                 scene: scene_path.display().to_string(),
                 patches: last.report.patches,
                 method,
-                rays: ray_count,
+                rays: request.form_factors.rays_per_pair,
+                links,
+                peak_bytes,
                 seconds: [load + mesh, ff, solve, load + mesh + ff + solve],
                 error,
                 pareto: false,
@@ -113,18 +128,56 @@ fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf]) -> anyhow::Result<S
         let noise = rows.iter().find(|r| r.scene == scene.display().to_string()).map_or(0.0, |r| r.error.reference_noise);
         writeln!(out, "Reference for `{}`: {} probes × {} paths (`{}`), relative noise {:.4}.\n", scene.display(), reference.probes.len(), reference.samples, reference.command, noise)?;
     }
-    writeln!(out, "| scene | patches | method | rays | load+mesh s | form factors s | solve s | total s | smooth RMS | flat RMS | max | energy | front |")?;
-    writeln!(out, "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|:-:|")?;
+    writeln!(out, "*links* are the dense matrix's n² entries or the hierarchy's links; *peak MB* is the largest heap in use during the run.\n")?;
+    writeln!(out, "| scene | patches | method | rays | links | links/patch | peak MB | load+mesh s | form factors s | solve s | total s | smooth RMS | flat RMS | max | energy | front |")?;
+    writeln!(out, "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:-:|")?;
     for r in rows {
         writeln!(
             out,
-            "| {} | {} | {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.3} | {:+.4} | {} |",
-            r.scene, r.patches, r.method, r.rays, r.seconds[0], r.seconds[1], r.seconds[2], r.seconds[3],
+            "| {} | {} | {} | {} | {} | {:.1} | {:.0} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.3} | {:+.4} | {} |",
+            r.scene, r.patches, r.method, r.rays, r.links, r.links as f64 / r.patches.max(1) as f64, r.peak_bytes as f64 / 1e6,
+            r.seconds[0], r.seconds[1], r.seconds[2], r.seconds[3],
             r.error.smooth.rms, r.error.flat.rms, r.error.smooth.max, r.error.smooth.energy,
             if r.pareto { "★" } else { "" }
         )?;
     }
+    writeln!(out, "\n## Hierarchical against dense at equal error\n")?;
+    writeln!(out, "Dense GMRES seconds at the hierarchical row's smooth RMS, interpolated log-log between the two dense rows (2 rays per pair) that bracket it; beyond the dense rows, extrapolated from the last two (marked ~).\n")?;
+    writeln!(out, "| scene | hierarchical | leaves | seconds | smooth RMS | dense seconds at that RMS | dense patches at that RMS | speed-up |")?;
+    writeln!(out, "|---|---|---:|---:|---:|---:|---:|---:|")?;
+    for h in rows.iter().filter(|r| r.method.starts_with("hierarchical")) {
+        let mut dense: Vec<&Row> = rows.iter().filter(|r| r.scene == h.scene && r.method == "gmres" && r.rays == FormFactorSettings::default().rays_per_pair).collect();
+        dense.sort_by_key(|r| r.patches);
+        let Some(((seconds, patches), extrapolated)) = dense_at(&dense, h.error.smooth.rms) else { continue };
+        writeln!(
+            out,
+            "| {} | {} | {} | {:.3} | {:.4} | {}{:.2} | {}{:.0} | {}{:.1}× |",
+            h.scene, h.method, h.patches, h.seconds[3], h.error.smooth.rms, if extrapolated { "~" } else { "" }, seconds, if extrapolated { "~" } else { "" }, patches,
+            if extrapolated { "~" } else { "" }, seconds / h.seconds[3]
+        )?;
+    }
     Ok(out)
+}
+
+/// Dense (seconds, patches) at smooth RMS `target`: log-log interpolation between the bracketing
+/// rows of `dense` (sorted by patches, error falling), or extrapolation from the last two; and
+/// whether it was extrapolated.
+fn dense_at(dense: &[&Row], target: f64) -> Option<((f64, f64), bool)> {
+    if dense.len() < 2 {
+        return None;
+    }
+    let pair = dense.windows(2).find(|w| w[0].error.smooth.rms >= target && target >= w[1].error.smooth.rms);
+    let (a, b, extrapolated) = match pair {
+        Some(w) => (w[0], w[1], false),
+        None => (dense[dense.len() - 2], dense[dense.len() - 1], true),
+    };
+    let (ea, eb) = (a.error.smooth.rms.ln(), b.error.smooth.rms.ln());
+    if ea == eb {
+        return None;
+    }
+    let t = (target.ln() - ea) / (eb - ea);
+    let at = |x: f64, y: f64| (x.ln() + t * (y.ln() - x.ln())).exp();
+    Some(((at(a.seconds[3], b.seconds[3]), at(a.patches as f64, b.patches as f64)), extrapolated))
 }
 
 fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
@@ -147,7 +200,9 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
         .y_label_formatter(&|y| format!("{y:.3}"))
         .draw()?;
     let colours = [RED, BLUE, GREEN, MAGENTA, CYAN, BLACK];
-    let mut groups: Vec<(String, u32)> = rows.iter().map(|r| (r.method.to_string(), r.rays)).collect();
+    // Hierarchical rows form one group whatever their knob.
+    let group = |r: &Row| if r.method.starts_with("hierarchical") { ("hierarchical".to_string(), 0) } else { (r.method.clone(), r.rays) };
+    let mut groups: Vec<(String, u32)> = rows.iter().map(group).collect();
     groups.sort();
     groups.dedup();
     let mut scenes: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
@@ -155,7 +210,7 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
     let point = |r: &Row| (r.seconds[3], r.error.smooth.rms.max(1e-6));
     for (k, (method, rays)) in groups.iter().enumerate() {
         let colour = colours[k % colours.len()];
-        let in_group = |r: &&Row| r.method.to_string() == *method && r.rays == *rays;
+        let in_group = |r: &&Row| group(r) == (method.clone(), *rays);
         // Circles for the first scene, triangles for the second, squares after.
         for (s, scene) in scenes.iter().enumerate() {
             let points: Vec<(f64, f64)> = rows.iter().filter(in_group).filter(|r| r.scene == *scene).map(point).collect();
@@ -166,7 +221,8 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
                 _ => chart.draw_series(points.iter().map(|p| Rectangle::new([*p, *p], style)))?,
             };
         }
-        chart.draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?.label(format!("{method}, {rays} rays/pair")).legend(move |(x, y)| Circle::new((x, y), 5, colour.filled()));
+        let label = if *rays == 0 { format!("{method} (E sweep)") } else { format!("{method}, {rays} rays/pair") };
+        chart.draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?.label(label).legend(move |(x, y)| Circle::new((x, y), 5, colour.filled()));
     }
     for (s, scene) in scenes.iter().enumerate() {
         let mut front: Vec<(f64, f64)> = rows.iter().filter(|r| r.pareto && r.scene == *scene).map(point).collect();

@@ -8,42 +8,15 @@ use solver::form_factors::MAX_RAYS_PER_PAIR;
 use solver::accuracy::evaluate;
 use solver::reference::{Reference, place_probes, trace_probes};
 use solver::visibility::Occluders;
-use solver::{FormFactorSettings, Method, PatchTarget, Progress, Scene, SolveReport, SolveRequest, SolverSettings, solve_file};
+use solver::{FormFactorSettings, MethodChoice, PatchTarget, Progress, Scene, SolveReport, SolveRequest, SolverSettings, solve_file};
 use solver::HierarchySettings;
 use std::path::PathBuf;
-use std::str::FromStr;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 /// Counts heap bytes, so that reports can give their peak.
 #[global_allocator]
 static HEAP: peak_alloc::PeakAlloc = peak_alloc::PeakAlloc;
-
-/// `--method`: a solver on the dense matrix, or hierarchical radiosity (solved with GMRES).
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum MethodChoice {
-    Dense(Method),
-    Hierarchical,
-}
-
-impl FromStr for MethodChoice {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        if s == "hierarchical" {
-            return Ok(MethodChoice::Hierarchical);
-        }
-        s.parse().map(MethodChoice::Dense).map_err(|e: String| e.replace("(expected one of: ", "(expected hierarchical or one of: "))
-    }
-}
-
-impl std::fmt::Display for MethodChoice {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            MethodChoice::Dense(method) => method.fmt(f),
-            MethodChoice::Hierarchical => f.write_str("hierarchical"),
-        }
-    }
-}
 
 /// Radiosity for Wavefront OBJ + MTL scenes (Kd = reflectance, Ke = emitted radiosity).
 #[derive(Parser)]
@@ -61,6 +34,9 @@ enum Command {
         scene: PathBuf,
         #[command(flatten)]
         settings: Settings,
+        /// With --method hierarchical: the relative error a link may carry; smaller refines more.
+        #[arg(long, default_value_t = HierarchySettings::default().error)]
+        error: f64,
         /// Print one JSON object on stdout instead of the table.
         #[arg(long)]
         json: bool,
@@ -111,6 +87,9 @@ enum Command {
         /// Shadow rays per far pair to sweep with --error, comma-separated.
         #[arg(long, value_delimiter = ',', default_value = "1,2,4")]
         sweep_rays: Vec<u32>,
+        /// Hierarchical error knobs to sweep with --error, comma-separated.
+        #[arg(long, value_delimiter = ',', default_value = "0.1,0.05,0.02")]
+        sweep_error: Vec<f64>,
         /// Folder for the --error table and plot.
         #[arg(long, default_value = "docs")]
         out_dir: PathBuf,
@@ -137,9 +116,6 @@ struct Settings {
     /// or hierarchical: adaptive elements and links, solved with GMRES (--error sets accuracy).
     #[arg(long, default_value = "gmres")]
     method: MethodChoice,
-    /// With --method hierarchical: the relative error a link may carry; smaller refines more.
-    #[arg(long, default_value_t = HierarchySettings::default().error)]
-    error: f64,
     /// Stop when the relative residual is at most this.
     #[arg(long, default_value_t = 1e-6)]
     tolerance: f64,
@@ -155,7 +131,11 @@ struct Settings {
 }
 
 impl Settings {
-    fn request(&self) -> anyhow::Result<SolveRequest> {
+    /// The request; `error` is the hierarchical knob.
+    fn request(&self, error: f64) -> anyhow::Result<SolveRequest> {
+        if !(error > 0.0 && error < 1.0) {
+            bail!("--error must be in (0, 1), got {error}");
+        }
         let patches = match self.patch_size {
             Some(size) if size.is_finite() && size > 0.0 => PatchTarget::EdgeLength(size),
             Some(size) => bail!("--patch-size must be a positive length, got {size}"),
@@ -168,27 +148,16 @@ impl Settings {
         if !(self.omega > 0.0 && self.omega < 2.0) {
             bail!("--omega must be in (0, 2), got {}", self.omega);
         }
-        if !(self.error > 0.0 && self.error < 1.0) {
-            bail!("--error must be in (0, 1), got {}", self.error);
-        }
         if self.rays == 0 || self.rays > MAX_RAYS_PER_PAIR {
             bail!("--rays must be in 1..={MAX_RAYS_PER_PAIR}, got {}", self.rays);
         }
-        Ok(SolveRequest {
+        let request = SolveRequest {
             patches,
             form_factors: FormFactorSettings { rays_per_pair: self.rays },
-            solver: SolverSettings {
-                method: match self.method {
-                    MethodChoice::Dense(method) => method,
-                    MethodChoice::Hierarchical => Method::Gmres,
-                },
-                tolerance: self.tolerance,
-                max_iterations: self.max_iterations,
-                relaxation: self.omega,
-            },
-            hierarchy: (self.method == MethodChoice::Hierarchical).then_some(HierarchySettings { error: self.error, ..HierarchySettings::default() }),
+            solver: SolverSettings { tolerance: self.tolerance, max_iterations: self.max_iterations, relaxation: self.omega, ..SolverSettings::default() },
             ..SolveRequest::default()
-        })
+        };
+        Ok(request.with_method(self.method, error))
     }
 }
 
@@ -225,8 +194,8 @@ impl ProgressPrinter {
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
-        Command::Solve { scene, settings, json, reference } => {
-            let request = settings.request()?;
+        Command::Solve { scene, settings, error, json, reference } => {
+            let request = settings.request(error)?;
             let printer = ProgressPrinter::new();
             let reference = reference
                 .map(|path| -> anyhow::Result<Reference> {
@@ -287,14 +256,17 @@ fn main() -> anyhow::Result<()> {
             let loaded = Scene::load_obj(&out)?;
             eprintln!("wrote {} and {}: {} objects, {} faces ({} triangles)", out.display(), mtl_path.display(), loaded.objects.len(), loaded.faces.len(), loaded.triangle_count());
         }
-        Command::Bench { scenes, error: true, counts, repeat, sweep_rays, out_dir, .. } => {
+        Command::Bench { scenes, error: true, counts, repeat, sweep_rays, sweep_error, out_dir, .. } => {
+            let list = |values: &[String]| values.join(",");
             let command = format!(
-                "radcast bench --error {} --counts {} --sweep-rays {} --repeat {repeat}",
+                "radcast bench --error {} --counts {} --sweep-rays {} --sweep-error {} --repeat {repeat}",
                 scenes.iter().map(|s| s.display().to_string()).collect::<Vec<_>>().join(" "),
-                counts.iter().map(ToString::to_string).collect::<Vec<_>>().join(","),
-                sweep_rays.iter().map(ToString::to_string).collect::<Vec<_>>().join(",")
+                list(&counts.iter().map(ToString::to_string).collect::<Vec<_>>()),
+                list(&sweep_rays.iter().map(ToString::to_string).collect::<Vec<_>>()),
+                list(&sweep_error.iter().map(ToString::to_string).collect::<Vec<_>>())
             );
-            error_sweep::run(&scenes, &counts, &sweep_rays, repeat.max(1), &out_dir, &command)?;
+            anyhow::ensure!(sweep_error.iter().all(|e| *e > 0.0 && *e < 1.0), "--sweep-error values must be in (0, 1)");
+            error_sweep::run(&scenes, &counts, &sweep_rays, &sweep_error, repeat.max(1), &out_dir, &command)?;
         }
         Command::Bench { scenes, counts, repeat, settings, .. } => {
             for scene in &scenes {
@@ -342,7 +314,7 @@ fn bench(scene: &std::path::Path, counts: &[usize], repeat: usize, settings: &Se
     println!("| patches | load s | mesh s | form factors s | solve s | total s | iterations | rays |");
     println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
     for &count in counts {
-        let request = Settings { patches: count, patch_size: None, ..settings.clone() }.request()?;
+        let request = Settings { patches: count, patch_size: None, ..settings.clone() }.request(HierarchySettings::default().error)?;
         let mut runs = Vec::new();
         for _ in 0..repeat {
             runs.push(solve_file(scene, &request, &solver::no_progress)?.report);
