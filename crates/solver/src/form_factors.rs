@@ -125,6 +125,12 @@ pub(crate) fn splitmix64(mut x: u64) -> u64 {
     x ^ (x >> 31)
 }
 
+/// A seed for the sample pattern of the ordered pair `(a, b)`: the same every time, different
+/// between pairs.
+pub(crate) fn pair_seed(a: usize, b: usize) -> u64 {
+    splitmix64(((a as u64) << 32) | b as u64)
+}
+
 /// The k-th point of Roberts' R2 sequence, rotated by `offset` (Cranley-Patterson), kept off the
 /// patch border so that a ray never starts on a shared edge.
 pub(crate) fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
@@ -139,7 +145,7 @@ pub(crate) fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
 /// The `rays` shadow segments between `p` and `q`: stratified points on both, decorrelated per
 /// pair, the same every time for the same pair.
 fn pair_segments<'a>(p: &'a Patch, q: &'a Patch, pair: (usize, usize), rays: u32) -> impl Iterator<Item = (DVec3, DVec3)> + 'a {
-    let seed = splitmix64(((pair.0 as u64) << 32) | pair.1 as u64);
+    let seed = pair_seed(pair.0, pair.1);
     let (seed_p, seed_q) = (seed, splitmix64(seed));
     (0..rays).map(move |k| {
         let (u, v) = stratified_uv(k, seed_p);

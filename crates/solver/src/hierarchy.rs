@@ -11,10 +11,11 @@
 //!   cluster link carries the sampled area-average kernel. Clusters only send: a receiving
 //!   cluster would hand its irradiance to faces that cannot see the source.
 //! - **Refinement** (BF with visibility): a link is kept when the radiosity error it can carry,
-//!   `rho_R (B_S dF + F dB_S)`, is within the tolerance; else its larger end is split. `dF` is
-//!   the spread of the factor over the receiver: the whole factor when visibility is partial or
-//!   a cluster takes part, so partial occlusion refines while full visibility and full occlusion
-//!   do not. Refinement runs again on each new solution until no link changes.
+//!   `rho_R (B_S dF + F dB_S)`, is within the tolerance. `dF` is the spread of the factor over
+//!   the receiver, kernel and visibility both (a bound, for a cluster), so partial occlusion
+//!   refines while full visibility and full occlusion do not. Between elements the receiver
+//!   splits for `dF` and the source for `dB_S`; with a cluster, the larger end splits.
+//!   Refinement runs again on each new solution until no link changes.
 //! - **Visibility**: a shaft between the two elements (Haines, Wallace 1994, "Shaft Culling for
 //!   Efficient Ray-Cast Radiosity") collects the faces that can block. None: clear, no rays. One
 //!   face that separates the two and covers every segment between them: hidden, no rays. Else
@@ -24,7 +25,7 @@
 //!   GMRES and Jacobi solve it. No dense matrix anywhere: memory is O(elements + links).
 
 use crate::Progress;
-use crate::form_factors::{FormFactorSettings, Transport, mutually_facing, near_pair_level, rays_for_pair, sees_closed_view, splitmix64, stratified_uv, unoccluded_form_factor};
+use crate::form_factors::{FormFactorSettings, Transport, mutually_facing, near_pair_level, pair_seed, rays_for_pair, sees_closed_view, splitmix64, stratified_uv, unoccluded_form_factor};
 use crate::geometry::{Polygon, bounds, point_to_polygon_form_factor};
 use crate::mesh::{Mesh, Patch};
 use crate::scene::{Rgb, Scene};
@@ -297,9 +298,10 @@ enum Visibility {
 
 /// A link's factor before refinement decides.
 struct Estimate {
-    /// Unoccluded factor (surfaces) or an upper bound (clusters).
+    /// The factor between elements (unoccluded, or with visibility when partly hidden), or an
+    /// upper bound with a cluster.
     factor: f64,
-    /// Its spread over the receiver.
+    /// Its spread over the receiver, visibility included.
     spread: f64,
     visibility: Visibility,
 }
@@ -341,21 +343,14 @@ impl Refiner<'_> {
         if estimate.visibility == Visibility::Hidden {
             return Decision::Drop;
         }
-        match split_side(r, s, self.errors(receiver, source, estimate.factor, estimate.spread), self.tolerance, self.smallest) {
+        let errors = link_errors(r, (self.radiosity[source as usize], self.spread[source as usize]), estimate.factor, estimate.spread);
+        match split_side(r, s, errors, self.tolerance, self.smallest) {
             Some(true) => return Decision::SplitReceiver,
             Some(false) => return Decision::SplitSource,
             None => {}
         }
         let factor = self.factor(receiver, source, &estimate);
         if factor > 0.0 { Decision::Keep(Link { receiver, source, factor: factor as f32, spread: estimate.spread as f32 }) } else { Decision::Drop }
-    }
-
-    /// The radiosity errors a link can carry: `rho_R B_S dF` from the factor's spread over the
-    /// receiver (only splitting the receiver reduces it) and `rho_R F dB_S` from the source's
-    /// own spread (only splitting the source does).
-    fn errors(&self, receiver: u32, source: u32, factor: f64, spread: f64) -> (f64, f64) {
-        let (rho, s) = (self.node(receiver).reflectance, source as usize);
-        (rho * self.radiosity[s] * spread, rho * factor * self.spread[s])
     }
 
     fn estimate(&self, receiver: u32, source: u32) -> Option<Estimate> {
@@ -462,13 +457,13 @@ impl Refiner<'_> {
     }
 
     /// The factor of a partly hidden pair, and the least and most visibility over the receiver's
-    /// points (near pairs, where visibility varies fastest, get more rays per point): at each receiver quadrature point, the analytic factor times the kernel-weighted
+    /// points: at each receiver quadrature point, the analytic factor times the kernel-weighted
     /// share of clear rays to stratified source points. The weights matter: where a receiver
     /// meets a wall the kernel peaks just where nothing blocks, and `unoccluded factor x clear
-    /// share` ran 25-30% low there (measured on the Cornell box).
+    /// share` ran 16-30% low there (measured on the Cornell box, docs/ACCURACY.md).
     fn partly_hidden_factor(&self, receiver: u32, source: u32, level: u32, rays_per_point: u32) -> (f64, f64, f64) {
         let (p, q) = (&self.node(receiver).element.as_ref().expect("an element").patch, &self.node(source).element.as_ref().expect("an element").patch);
-        let seed = splitmix64(((receiver as u64) << 32) | source as u64);
+        let seed = pair_seed(receiver as usize, source as usize);
         let (mut factor, mut point, mut cast, mut least, mut most) = (0.0, 0u32, 0u64, 1.0f64, 0.0f64);
         p.polygon.for_each_quadrature_point(level, |x, weight| {
             point += 1;
@@ -505,7 +500,7 @@ impl Refiner<'_> {
     /// The area-average kernel `A_S E[cos cos V / (pi d^2)]` over point pairs spread by area on
     /// both ends: an unbiased estimate of the factor between any two sets of surfaces.
     fn sampled_factor(&self, receiver: u32, source: u32) -> f64 {
-        let seed = splitmix64(((receiver as u64) << 32) | source as u64);
+        let seed = pair_seed(receiver as usize, source as usize);
         let mut sum = 0.0;
         for k in 0..CLUSTER_SAMPLES {
             let (x, nx, fx) = self.hierarchy.sample(receiver, k, seed);
@@ -604,16 +599,6 @@ impl Hierarchy {
         self.stats
     }
 
-    /// Bytes held by nodes, links and the operator's tables.
-    pub fn memory_bytes(&self) -> usize {
-        use std::mem::size_of;
-        self.nodes.capacity() * size_of::<Node>()
-            + self.links.capacity() * size_of::<Link>()
-            + self.incoming.capacity() * size_of::<(u32, f32)>()
-            + (self.offsets.capacity() + self.leaves.capacity()) * size_of::<u32>()
-            + self.row_scale.capacity() * size_of::<f64>()
-    }
-
     /// Splits element `n` into four (once).
     fn subdivide(&mut self, n: u32) {
         let node = &self.nodes[n as usize];
@@ -710,7 +695,7 @@ impl Hierarchy {
     /// Per node, the largest channel of its area-mean radiosity and the spread of that over
     /// its leaves, from per-leaf radiosity.
     fn node_radiosity(&self, leaf_radiosity: &[Rgb]) -> (Vec<f64>, Vec<f64>) {
-        let mut mean = self.pull(leaf_radiosity);
+        let mean = self.pull(leaf_radiosity);
         let mut low = vec![f64::INFINITY; self.nodes.len()];
         let mut high = vec![0.0f64; self.nodes.len()];
         for (i, &leaf) in self.leaves.iter().enumerate() {
@@ -724,7 +709,7 @@ impl Hierarchy {
             }
         }
         let spread = high.iter().zip(&low).map(|(h, l)| (h - l).max(0.0)).collect();
-        (mean.iter_mut().map(|b| b.max_element()).collect(), spread)
+        (mean.iter().map(|b| b.max_element()).collect(), spread)
     }
 
     /// Area-weighted mean radiosity of every node from its leaves'.
@@ -875,11 +860,10 @@ impl Hierarchy {
                 // Links that the new solution shows too coarse go back to refinement; only
                 // those that can still be split count as changes.
                 let node = |n: u32| &hierarchy.nodes[n as usize];
-                let errors = |link: &Link| {
-                    let (rho, s) = (node(link.receiver).reflectance, link.source as usize);
-                    (rho * node_radiosity[s] * link.spread as f64, rho * link.factor as f64 * node_spread[s])
-                };
-                let (redo, keep): (Vec<Link>, Vec<Link>) = hierarchy.links.par_iter().partition(|l| split_side(node(l.receiver), node(l.source), errors(l), tolerance, smallest).is_some());
+                let (redo, keep): (Vec<Link>, Vec<Link>) = hierarchy.links.par_iter().partition(|l| {
+                    let source = (node_radiosity[l.source as usize], node_spread[l.source as usize]);
+                    split_side(node(l.receiver), node(l.source), link_errors(node(l.receiver), source, l.factor as f64, l.spread as f64), tolerance, smallest).is_some()
+                });
                 if redo.is_empty() {
                     break;
                 }
@@ -911,6 +895,14 @@ fn mean_reflected(hierarchy: &Hierarchy, radiosity: &[Rgb]) -> f64 {
         (sum + (*b - patch.emission).max(Rgb::ZERO).max_element() * patch.area, area + patch.area)
     });
     if area > 0.0 { sum / area } else { 0.0 }
+}
+
+/// The radiosity errors a link into `receiver` can carry, from its source's (mean, spread) of
+/// radiosity: `rho_R B_S dF` from the factor's spread over the receiver (only splitting the
+/// receiver reduces it) and `rho_R F dB_S` from the source's own spread (only splitting the
+/// source does).
+fn link_errors(receiver: &Node, (radiosity, radiosity_spread): (f64, f64), factor: f64, spread: f64) -> (f64, f64) {
+    (receiver.reflectance * radiosity * spread, receiver.reflectance * factor * radiosity_spread)
 }
 
 /// Which end of a link to split: `Some(true)` the receiver, `Some(false)` the source, `None`
