@@ -5,7 +5,7 @@ mod common;
 
 use common::*;
 use glam::{DVec3, dvec3};
-use solver::{Method, PatchTarget, Rgb, Scene, SolveRequest, SolverSettings, Solved, solve_scene};
+use solver::{Method, PatchTarget, Scene, SolveRequest, SolverSettings, Solved, solve_scene};
 use std::f64::consts::PI;
 
 fn solve(scene: Scene, patches: usize) -> Solved {
@@ -15,11 +15,6 @@ fn solve(scene: Scene, patches: usize) -> Solved {
         ..SolveRequest::default()
     };
     solve_scene(scene, &request, &solver::no_progress).expect("solves")
-}
-
-fn mean_of(solved: &Solved, object: &str) -> Rgb {
-    let o = solved.report.objects.iter().find(|o| o.name == object).expect("object exists");
-    Rgb::from(o.radiosity)
 }
 
 #[test]
@@ -100,12 +95,7 @@ fn hdr_emitters_keep_the_encoding_bound() {
 fn an_occluder_inside_a_closed_enclosure_keeps_the_furnace_exact() {
     // A closed box (outward faces) floating inside the closed room; everything emits and reflects alike.
     let (rho, emission) = (0.8, 1.0);
-    let mut scene = closed_cube(3.0, grey(rho, emission));
-    let (o, s) = (dvec3(1.0, 1.0, 1.0), 1.0);
-    let (x, y, z) = (DVec3::X * s, DVec3::Y * s, DVec3::Z * s);
-    for (origin, u, v) in [(o, x, z), (o + y, z, x), (o, z, y), (o + x, y, z), (o, y, x), (o + z, x, y)] {
-        add_rect(&mut scene, "block", origin, u, v, grey(rho, emission));
-    }
+    let scene = occluded_furnace(grey(rho, emission));
     let solved = solve(scene, 400);
     let expected = emission / (1.0 - rho);
     let worst = solved.radiosity.iter().map(|b| (b.x / expected - 1.0).abs()).fold(0.0, f64::max);
@@ -115,21 +105,8 @@ fn an_occluder_inside_a_closed_enclosure_keeps_the_furnace_exact() {
 
 #[test]
 fn no_light_leaks_through_a_closed_wall() {
-    // Two closed rooms side by side sharing a wall made of two back-to-back faces; only room A has a lamp.
-    let mut scene = Scene::default();
-    for (room, dx) in [("a", 0.0), ("b", 1.0)] {
-        let origin = DVec3::X * dx;
-        let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
-        add_rect(&mut scene, room, origin, z, x, grey(0.7, 0.0));
-        add_rect(&mut scene, room, origin + y, x, z, grey(0.7, 0.0));
-        add_rect(&mut scene, room, origin, y, z, grey(0.7, 0.0));
-        add_rect(&mut scene, room, origin + x, z, y, grey(0.7, 0.0));
-        add_rect(&mut scene, room, origin, x, y, grey(0.7, 0.0));
-        add_rect(&mut scene, room, origin + z, y, x, grey(0.7, 0.0));
-    }
-    add_rect(&mut scene, "lamp", dvec3(0.4, 0.999, 0.4), DVec3::X * 0.2, DVec3::Z * 0.2, grey(0.0, 10.0));
-    let solved = solve(scene, 600);
-    let lit: Vec<f64> = solved.mesh.patches.iter().zip(&solved.radiosity).filter(|(p, _)| solved.scene.objects[p.object as usize].name == "b").map(|(_, b)| b.max_element()).collect();
+    let solved = solve(two_rooms_one_lamp(), 600);
+    let lit = brightness_of(&solved, "b");
     println!("room b: {} patches, brightest {:e}", lit.len(), lit.iter().cloned().fold(0.0, f64::max));
     assert!(!lit.is_empty() && lit.iter().all(|b| *b == 0.0), "light leaked into room b");
     assert!(mean_of(&solved, "a").x > 0.1);

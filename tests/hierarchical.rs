@@ -5,7 +5,7 @@ mod common;
 
 use common::*;
 use glam::{DVec3, dvec3};
-use solver::{HierarchySettings, Method, Rgb, Scene, SolveError, SolveRequest, SolverSettings, Solved, solve_scene};
+use solver::{HierarchySettings, Method, Scene, SolveError, SolveRequest, SolverSettings, Solved, solve_scene};
 use std::path::Path;
 
 fn hierarchical(error: f64) -> SolveRequest {
@@ -20,11 +20,6 @@ fn solve(scene: Scene, error: f64) -> Solved {
     solve_scene(scene, &hierarchical(error), &solver::no_progress).expect("solves")
 }
 
-fn mean_of(solved: &Solved, object: &str) -> Rgb {
-    let o = solved.report.objects.iter().find(|o| o.name == object).expect("object exists");
-    Rgb::from(o.radiosity)
-}
-
 #[test]
 fn furnaces_stay_exact_with_and_without_an_occluder() {
     for rho in [0.5, 0.9, 0.99] {
@@ -35,12 +30,7 @@ fn furnaces_stay_exact_with_and_without_an_occluder() {
         assert!(worst < 1e-3, "rho {rho}: {worst}");
     }
     let (rho, emission) = (0.8, 1.0);
-    let mut scene = closed_cube(3.0, grey(rho, emission));
-    let (o, s) = (dvec3(1.0, 1.0, 1.0), 1.0);
-    let (x, y, z) = (DVec3::X * s, DVec3::Y * s, DVec3::Z * s);
-    for (origin, u, v) in [(o, x, z), (o + y, z, x), (o, z, y), (o + x, y, z), (o, y, x), (o + z, x, y)] {
-        add_rect(&mut scene, "block", origin, u, v, grey(rho, emission));
-    }
+    let scene = occluded_furnace(grey(rho, emission));
     let solved = solve(scene, 0.1);
     let worst = solved.radiosity.iter().map(|b| (b.x * (1.0 - rho) / emission - 1.0).abs()).fold(0.0, f64::max);
     println!("hierarchical occluded furnace: {} leaves, worst relative error {worst:.2e}", solved.radiosity.len());
@@ -62,17 +52,8 @@ fn plates_and_hinge_give_rho_f_e() {
 
 #[test]
 fn no_light_leaks_through_a_closed_wall() {
-    let mut scene = Scene::default();
-    for (room, dx) in [("a", 0.0), ("b", 1.0)] {
-        let origin = DVec3::X * dx;
-        let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
-        for (corner, u, v) in [(origin, z, x), (origin + y, x, z), (origin, y, z), (origin + x, z, y), (origin, x, y), (origin + z, y, x)] {
-            add_rect(&mut scene, room, corner, u, v, grey(0.7, 0.0));
-        }
-    }
-    add_rect(&mut scene, "lamp", dvec3(0.4, 0.999, 0.4), DVec3::X * 0.2, DVec3::Z * 0.2, grey(0.0, 10.0));
-    let solved = solve(scene, 0.05);
-    let room_b: Vec<f64> = solved.mesh.patches.iter().zip(&solved.radiosity).filter(|(p, _)| solved.scene.objects[p.object as usize].name == "b").map(|(_, b)| b.max_element()).collect();
+    let solved = solve(two_rooms_one_lamp(), 0.05);
+    let room_b = brightness_of(&solved, "b");
     let (brightest, lit) = (room_b.iter().cloned().fold(0.0, f64::max), mean_of(&solved, "a").x);
     println!("room b: {} leaves, brightest {brightest:e}; room a mean {lit}", room_b.len());
     // Round-off of the Krylov solve, not transport: no link carries light across the wall.

@@ -3,7 +3,7 @@
 
 use glam::{DVec3, dvec3};
 use solver::visibility::Occluders;
-use solver::{DenseFormFactors, FormFactorSettings, Material, Mesh, PatchTarget, Rgb, Scene};
+use solver::{DenseFormFactors, FormFactorSettings, Material, Mesh, PatchTarget, Rgb, Scene, Solved};
 use std::f64::consts::PI;
 
 /// A grey material.
@@ -29,6 +29,43 @@ pub fn closed_cube(size: f64, material: Material) -> Scene {
     add_rect(&mut scene, "wall_z0", DVec3::ZERO, x, y, material);
     add_rect(&mut scene, "wall_z1", z, y, x, material);
     scene
+}
+
+/// The closed room [0, 3]^3 with a closed box [1, 2]^3 (outward faces, object "block") floating
+/// inside; everything of one material: a furnace with an occluder.
+pub fn occluded_furnace(material: Material) -> Scene {
+    let mut scene = closed_cube(3.0, material);
+    let o = dvec3(1.0, 1.0, 1.0);
+    let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
+    for (origin, u, v) in [(o, x, z), (o + y, z, x), (o, z, y), (o + x, y, z), (o, y, x), (o + z, x, y)] {
+        add_rect(&mut scene, "block", origin, u, v, material);
+    }
+    scene
+}
+
+/// Two closed unit rooms "a" and "b" side by side, sharing a wall made of two back-to-back
+/// faces; only room a has a lamp.
+pub fn two_rooms_one_lamp() -> Scene {
+    let mut scene = Scene::default();
+    let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
+    for (room, origin) in [("a", DVec3::ZERO), ("b", x)] {
+        for (corner, u, v) in [(origin, z, x), (origin + y, x, z), (origin, y, z), (origin + x, z, y), (origin, x, y), (origin + z, y, x)] {
+            add_rect(&mut scene, room, corner, u, v, grey(0.7, 0.0));
+        }
+    }
+    add_rect(&mut scene, "lamp", dvec3(0.4, 0.999, 0.4), DVec3::X * 0.2, DVec3::Z * 0.2, grey(0.0, 10.0));
+    scene
+}
+
+/// Area-weighted mean radiosity of `object` in a solved scene.
+pub fn mean_of(solved: &Solved, object: &str) -> Rgb {
+    let o = solved.report.objects.iter().find(|o| o.name == object).expect("object exists");
+    Rgb::from(o.radiosity)
+}
+
+/// The largest channel of every patch of `object`.
+pub fn brightness_of(solved: &Solved, object: &str) -> Vec<f64> {
+    solved.mesh.patches.iter().zip(&solved.radiosity).filter(|(p, _)| solved.scene.objects[p.object as usize].name == object).map(|(_, b)| b.max_element()).collect()
 }
 
 /// Two directly opposed `a x b` rectangles a distance `c` apart: "receiver" at z = 0 facing +z,
