@@ -148,8 +148,8 @@ pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option
     let cache = cache_dir.filter(|_| prepared.request.hierarchy.is_none()).map(|dir| (dir, cache_path(dir, prepared.scene_id)));
     if let Some(cached) = cache.as_ref().and_then(|(_, path)| read_cache(path, prepared.mesh.patches.len())) {
         tracing::info!("solution read from the cache");
-        hub.publish(&cached.radiosity, true);
         *shared.report.lock().expect("report lock") = serde_json::from_str(&cached.report_json).ok();
+        hub.publish(&cached.radiosity, true);
         return Ok(Solution::Cached(cached.radiosity));
     }
     let last_snapshot = Mutex::new(Instant::now());
@@ -165,12 +165,13 @@ pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option
     let mut session = session_for(prepared, &progress)?;
     let report = session.solve(&progress);
     let radiosity = to_f32(session.radiosity());
-    hub.publish(&radiosity, true);
     let s = report.seconds;
     *shared.metrics.solve_seconds.lock().expect("metrics lock") = vec![("mesh", s.mesh), ("form_factors", s.form_factors), ("solve", s.solve), ("total", s.total)];
     tracing::info!(patches = report.patches, iterations = report.iterations, residual = report.residual, seconds = s.total, "solved");
     let report_json = serde_json::to_string(&report)?;
+    // The report goes in before the final frame: a viewer that sees "final" may ask for it at once.
     *shared.report.lock().expect("report lock") = serde_json::from_str(&report_json).ok();
+    hub.publish(&radiosity, true);
     if let Some((dir, path)) = cache {
         write_cache(dir, &path, &CachedSolution { radiosity, report_json })?;
     }
@@ -228,14 +229,14 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
         report = Some(session.solve(&solver::no_progress));
     }
     let report = report.unwrap_or_else(|| session.solve(&solver::no_progress));
+    if let Ok(json) = serde_json::to_value(&report) {
+        *shared.report.lock().expect("report lock") = Some(json);
+    }
     let version = shared.hub.publish(&to_f32(session.radiosity()), report.converged);
     tracing::info!(version, emissions = batch.emissions.len(), moves = batch.moves.len(), iterations = report.iterations, ms = started.elapsed().as_secs_f64() * 1e3, "re-solved");
     if moved {
         // Keep the lights' next edits instant on the moved scene.
         session.prepare_emitters();
-    }
-    if let Ok(json) = serde_json::to_value(&report) {
-        *shared.report.lock().expect("report lock") = Some(json);
     }
 }
 
