@@ -90,12 +90,12 @@ fn hierarchical_and_dense_agree_on_the_cornell_box() {
         println!("{}: hierarchical and dense means differ by {difference:.4}", d.name);
         weighted += difference * d.area;
         area += d.area;
-        // The ceiling sees only reflected light, where the link hierarchy's averaging of
-        // sources shows most (docs/ACCURACY.md): it gets twice the knob.
-        assert!(difference < 2.0 * error, "{}: {difference}", d.name);
+        assert!(difference < error, "{}: {difference}", d.name);
     }
+    // Links read each source's linear model where they see it, so their errors do not all
+    // lean one way and the mean difference stays well inside the knob (docs/ACCURACY.md).
     println!("area-weighted mean difference {:.4} ({} leaves vs 2500 patches)", weighted / area, hierarchical.radiosity.len());
-    assert!(weighted / area < error, "{}", weighted / area);
+    assert!(weighted / area < error / 2.0, "{}", weighted / area);
 }
 
 #[test]
