@@ -42,8 +42,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HierarchySettings {
     /// Relative error: links are refined until `rho_R (B_S dF + F dB_S)` is at most `error`
-    /// times the scene's mean reflected radiosity, and elements stop
-    /// splitting at [`MIN_RADIUS_PER_ERROR`] `* error` times their input face's radius.
+    /// times the scene's mean reflected radiosity, and elements stop splitting at
+    /// [`MIN_RADIUS_PER_ERROR`] `* error` times their input face's radius, capped at the
+    /// scene's median face radius.
     pub error: f64,
     /// Refinement-and-solve rounds at most (each refines on the newest solution).
     pub max_rounds: usize,
@@ -55,10 +56,11 @@ impl Default for HierarchySettings {
     }
 }
 
-/// Smallest element radius, as a fraction of `error` times its input face's radius (relative to
-/// the face, so that a lamp far above a floor does not coarsen the floor's shadows). Chosen by
-/// measurement on the Cornell box and the shadow slab (docs/BENCHMARKS.md): 0.5 spent most
-/// leaves on contact lines for little RMS; 2 left contact lines and shadow edges too coarse.
+/// Smallest element radius, as a fraction of `error` times its input face's radius capped at
+/// the median face radius ([`smallest_scale`]; relative to geometry, so that a lamp far above
+/// a floor does not coarsen the floor's shadows). Chosen by measurement on the Cornell box and
+/// the shadow slab before the cap (docs/BENCHMARKS.md): 0.5 spent most leaves on contact lines
+/// for little RMS; 2 left contact lines and shadow edges too coarse.
 pub const MIN_RADIUS_PER_ERROR: f64 = 1.0;
 
 /// Corners of elements are points of a per-face lattice with this many steps per side, so that
@@ -86,8 +88,8 @@ struct Element {
     /// Lattice coordinates of the corners: `(u, v)` on a quad, `(s, t)` on a triangle.
     lattice: [[u32; 2]; 4],
     depth: u32,
-    /// Bounding radius of the whole input face: the smallest element is relative to it.
-    face_radius: f64,
+    /// The length the smallest element is relative to ([`smallest_scale`]).
+    size_scale: f64,
 }
 
 /// A node of the hierarchy: an element (of a face) or a cluster (of faces).
@@ -582,6 +584,7 @@ impl Hierarchy {
         if face_count > 0 {
             nodes.push(placeholder.clone());
         }
+        let typical_radius = smallest_scale(scene);
         // Top-down, children after their parent, so that index order is a valid pull (reverse)
         // and push (forward) order.
         let mut stack = vec![(0u32, 0..face_count, NONE)];
@@ -593,7 +596,7 @@ impl Hierarchy {
                 let patch = Patch { polygon: f.polygon, corners: [0; 4], face, object: f.object, area: 0.0, centroid: DVec3::ZERO, normal: f.polygon.normal(), radius: 0.0, reflectance: f.reflectance, emission: f.emission };
                 let s = LATTICE_STEPS;
                 let lattice = if f.polygon.is_quad() { [[0, 0], [s, 0], [s, s], [0, s]] } else { [[0, 0], [s, 0], [0, s], [0, s]] };
-                nodes[index as usize] = element_node(Element { patch, lattice, depth: 0, face_radius: f.polygon.radius() }, parent, faces);
+                nodes[index as usize] = element_node(Element { patch, lattice, depth: 0, size_scale: f.polygon.radius().min(typical_radius) }, parent, faces);
                 face_node[face as usize] = index;
                 continue;
             }
@@ -676,7 +679,7 @@ impl Hierarchy {
             let p = lattice.map(|at| lattice_point(face, at));
             let polygon = if face.is_quad() { Polygon::quad(p[0], p[1], p[2], p[3]) } else { Polygon::triangle(p[0], p[1], p[2]) };
             let patch = Patch { polygon, ..element.patch };
-            self.nodes.push(element_node(Element { patch, lattice, depth: element.depth + 1, face_radius: element.face_radius }, n, faces.clone()));
+            self.nodes.push(element_node(Element { patch, lattice, depth: element.depth + 1, size_scale: element.size_scale }, n, faces.clone()));
         }
         let node = &mut self.nodes[n as usize];
         node.first_child = first;
@@ -1059,7 +1062,7 @@ fn link_errors(receiver: &Node, (radiosity, radiosity_spread): (f64, f64), facto
 /// error still exceeds the `tolerance`. With a cluster at either end, whose factor is only a
 /// bound or a sample, the larger end is split.
 fn split_side(r: &Node, s: &Node, (receiver_error, source_error): (f64, f64), tolerance: f64, smallest: f64) -> Option<bool> {
-    let can_split = |n: &Node| n.element.as_ref().is_none_or(|e| n.radius > smallest * e.face_radius && e.depth < MAX_DEPTH);
+    let can_split = |n: &Node| n.element.as_ref().is_none_or(|e| n.radius > smallest * e.size_scale && e.depth < MAX_DEPTH);
     if receiver_error + source_error <= tolerance {
         return None;
     }
@@ -1105,6 +1108,20 @@ fn is_buried(x: DVec3, patch: &Patch, occluders: &Occluders, seed: u64) -> bool 
 fn integration_level(p: &Patch, q: &Patch, mean: f64, spread: f64) -> u32 {
     let near = near_pair_level(p, q).unwrap_or(1);
     if spread > mean { near.max(3) } else { near }
+}
+
+/// The median bounding radius of the scene's faces. An element's smallest size is relative to
+/// its face's radius, capped at this: the shadows and contact lines a large face must resolve
+/// are cast by the scene's typical faces, not sized like the face itself. Relative to the face
+/// alone, the 17 m floor of the furnished room stopped at 2.4 m elements at knob 0.2 and its
+/// probes ran 37% RMS off (dense at 10,000 patches: 21%); capped, 17% (docs/BENCHMARKS.md).
+fn smallest_scale(scene: &Scene) -> f64 {
+    let mut radii: Vec<f64> = scene.faces.iter().map(|f| f.polygon.radius()).collect();
+    if radii.is_empty() {
+        return 0.0;
+    }
+    let middle = radii.len() / 2;
+    *radii.select_nth_unstable_by(middle, f64::total_cmp).1
 }
 
 /// A node for element `e` under `parent`.
@@ -1232,6 +1249,34 @@ mod tests {
             let node = n as usize;
             assert!((hierarchy.seen_area[node] - hierarchy.nodes[node].area).abs() < 1e-9, "face {face}: {}", hierarchy.seen_area[node]);
         }
+    }
+
+    #[test]
+    fn a_large_floor_refines_to_the_scale_of_what_stands_on_it() {
+        // A 20 m floor, a 1 m box on it and a 1 m lamp above: the median face is the box's.
+        let mut scene = Scene::default();
+        let grey = Material { reflectance: Rgb::splat(0.5), emission: Rgb::ZERO };
+        let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
+        let mut add = |origin: DVec3, u: DVec3, v: DVec3, material: Material| {
+            let object = scene.add_object("part");
+            scene.add_polygon(object, &[origin, origin + u, origin + u + v, origin + v], material);
+        };
+        add(DVec3::ZERO, z * 20.0, x * 20.0, grey);
+        let o = dvec3(9.5, 0.0, 9.5);
+        for (origin, u, v) in [(o + y, z, x), (o, z, y), (o + x, y, z), (o, y, x), (o + z, x, y)] {
+            add(origin, u, v, grey);
+        }
+        add(dvec3(11.0, 3.0, 9.5), x, z, Material { reflectance: Rgb::ZERO, emission: Rgb::splat(10.0) });
+        let error = 0.1;
+        let hierarchy = build(&scene, error);
+        let floor_leaves = hierarchy.leaves.iter().map(|&n| &hierarchy.nodes[n as usize]).filter(|n| n.element.as_ref().is_some_and(|e| e.patch.face == 0));
+        let finest = floor_leaves.map(|n| n.radius).fold(f64::INFINITY, f64::min);
+        let (floor_radius, box_radius) = (scene.faces[0].polygon.radius(), scene.faces[1].polygon.radius());
+        println!("finest floor leaf radius {finest:.4} (floor radius {floor_radius:.2}, box face {box_radius:.3})");
+        // Far below the floor's own scale, and not below the box's: a leaf is at most half its
+        // splittable parent.
+        assert!(finest < MIN_RADIUS_PER_ERROR * error * floor_radius / 4.0, "{finest}");
+        assert!(finest > MIN_RADIUS_PER_ERROR * error * box_radius / 2.0, "{finest}");
     }
 
     #[test]
