@@ -85,3 +85,17 @@ fn generate_writes_a_room_that_loads() {
     assert!(folder.join("room.mtl").exists());
     std::fs::remove_dir_all(&folder).unwrap();
 }
+
+#[test]
+fn bench_error_writes_its_table_and_plot_under_the_given_name() {
+    let folder = std::env::temp_dir().join(format!("radcast-bench-{}", std::process::id()));
+    let args = ["bench", "--error", "scenes/shadow-slab.obj", "--counts", "60", "--sweep-rays", "1", "--sweep-error", "0.3", "--repeat", "1"];
+    let output = radcast(&[&args[..], &["--out-dir", folder.to_str().unwrap(), "--name", "slab-check"]].concat());
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let table = std::fs::read_to_string(folder.join("slab-check.md")).expect("the table is written");
+    assert!(table.contains("--repeat 1 --name slab-check`"), "{table}");
+    assert!(table.contains("Plot: [slab-check.svg](slab-check.svg)"), "{table}");
+    assert!(table.contains("| hierarchical E=0.3 |"), "{table}");
+    assert!(std::fs::read_to_string(folder.join("slab-check.svg")).expect("the plot is written").starts_with("<svg"));
+    std::fs::remove_dir_all(&folder).unwrap();
+}

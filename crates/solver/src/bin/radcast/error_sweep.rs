@@ -44,9 +44,9 @@ fn median(mut values: Vec<f64>) -> f64 {
     values[values.len() / 2]
 }
 
-/// Runs the sweep and writes `<out_dir>/speed-vs-error.{md,svg}`: dense GMRES at each count and
-/// ray setting, the other solvers at the middle count, and the hierarchical path at each knob.
-pub fn run(scenes: &[PathBuf], counts: &[usize], rays: &[u32], errors: &[f64], repeat: usize, out_dir: &Path, command: &str) -> anyhow::Result<()> {
+/// Runs the sweep and writes `<out_dir>/<name>.{md,svg}`: dense GMRES at each count and ray
+/// setting, the other solvers at the middle count, and the hierarchical path at each knob.
+pub fn run(scenes: &[PathBuf], counts: &[usize], rays: &[u32], errors: &[f64], repeat: usize, (out_dir, name): (&Path, &str), command: &str) -> anyhow::Result<()> {
     if scenes.is_empty() {
         bail!("name at least one scene");
     }
@@ -108,18 +108,19 @@ pub fn run(scenes: &[PathBuf], counts: &[usize], rays: &[u32], errors: &[f64], r
         rows[i].pareto = !dominated;
     }
     std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
-    let table = markdown(&rows, command, scenes)?;
+    let table = markdown(&rows, command, scenes, name)?;
     print!("{table}");
-    std::fs::write(out_dir.join("speed-vs-error.md"), &table)?;
-    plot(&rows, &out_dir.join("speed-vs-error.svg"))?;
+    let table_path = out_dir.join(format!("{name}.md"));
+    std::fs::write(&table_path, &table).with_context(|| format!("{}: cannot write", table_path.display()))?;
+    plot(&rows, &out_dir.join(format!("{name}.svg")))?;
     Ok(())
 }
 
-fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf]) -> anyhow::Result<String> {
+fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf], name: &str) -> anyhow::Result<String> {
     let mut out = String::new();
     writeln!(out, "# Speed against error\n")?;
     writeln!(out, "Made by `{command}` on this project's 2-core machine (timings: medians; errors are deterministic).")?;
-    writeln!(out, "Plot: [speed-vs-error.svg](speed-vs-error.svg). Error is measured at the reference's probes on")?;
+    writeln!(out, "Plot: [{name}.svg]({name}.svg). Error is measured at the reference's probes on")?;
     writeln!(out, "non-emitting surfaces: *smooth* is what viewers show (corner-interpolated), *flat* the patch value;")?;
     writeln!(out, "RMS relative to the reference's RMS, max relative to the reference's RMS probe value, energy =")?;
     writeln!(out, "Σ B / Σ B_ref − 1. ★ marks the Pareto front (nothing else is both faster and more accurate).\n")?;

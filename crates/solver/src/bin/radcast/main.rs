@@ -93,6 +93,9 @@ enum Command {
         /// Folder for the --error table and plot.
         #[arg(long, default_value = "docs")]
         out_dir: PathBuf,
+        /// File stem of the --error table and plot (`<out-dir>/<name>.md` and `.svg`).
+        #[arg(long, default_value = "speed-vs-error")]
+        name: String,
         /// Patch counts to run, comma-separated.
         #[arg(long, value_delimiter = ',', default_value = "150,600,2500,10000")]
         counts: Vec<usize>,
@@ -256,17 +259,18 @@ fn main() -> anyhow::Result<()> {
             let loaded = Scene::load_obj(&out)?;
             eprintln!("wrote {} and {}: {} objects, {} faces ({} triangles)", out.display(), mtl_path.display(), loaded.objects.len(), loaded.faces.len(), loaded.triangle_count());
         }
-        Command::Bench { scenes, error: true, counts, repeat, sweep_rays, sweep_error, out_dir, .. } => {
+        Command::Bench { scenes, error: true, counts, repeat, sweep_rays, sweep_error, out_dir, name, .. } => {
             let list = |values: &[String]| values.join(",");
+            let named = if name == "speed-vs-error" { String::new() } else { format!(" --name {name}") };
             let command = format!(
-                "radcast bench --error {} --counts {} --sweep-rays {} --sweep-error {} --repeat {repeat}",
+                "radcast bench --error {} --counts {} --sweep-rays {} --sweep-error {} --repeat {repeat}{named}",
                 scenes.iter().map(|s| s.display().to_string()).collect::<Vec<_>>().join(" "),
                 list(&counts.iter().map(ToString::to_string).collect::<Vec<_>>()),
                 list(&sweep_rays.iter().map(ToString::to_string).collect::<Vec<_>>()),
                 list(&sweep_error.iter().map(ToString::to_string).collect::<Vec<_>>())
             );
             anyhow::ensure!(sweep_error.iter().all(|e| *e > 0.0 && *e < 1.0), "--sweep-error values must be in (0, 1)");
-            error_sweep::run(&scenes, &counts, &sweep_rays, &sweep_error, repeat.max(1), &out_dir, &command)?;
+            error_sweep::run(&scenes, &counts, &sweep_rays, &sweep_error, repeat.max(1), (&out_dir, &name), &command)?;
         }
         Command::Bench { scenes, counts, repeat, settings, .. } => {
             for scene in &scenes {
