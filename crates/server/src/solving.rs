@@ -38,8 +38,8 @@ pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepa
     let scene = Scene::load_obj(scene_path)?;
     let scene_id = scene_id(scene_path, &request)?;
     let (mesh, built) = match &request.hierarchy {
-        Some(settings) => {
-            let session = Session::hierarchical(&scene, settings, &request, &solver::no_progress)?;
+        Some(_) => {
+            let session = Session::hierarchical(&scene, &request, &solver::no_progress)?;
             (session.mesh().clone(), Some(session))
         }
         None => (Mesh::build(&scene, request.patches), None),
@@ -54,7 +54,7 @@ fn session_for(prepared: &Prepared, progress: &(dyn Fn(Progress) + Sync)) -> any
         return Ok(session);
     }
     Ok(match &prepared.request.hierarchy {
-        Some(settings) => Session::hierarchical(&prepared.scene, settings, &prepared.request, progress)?,
+        Some(_) => Session::hierarchical(&prepared.scene, &prepared.request, progress)?,
         None => Session::new(&prepared.scene, &prepared.mesh, &prepared.request, progress)?,
     })
 }

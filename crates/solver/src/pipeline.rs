@@ -185,7 +185,7 @@ pub fn solve_file(path: &Path, request: &SolveRequest, progress: &(dyn Fn(Progre
 /// Meshes, computes form factors (or builds the hierarchy) and solves an already loaded scene.
 pub fn solve_scene(scene: Scene, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<Solved, SolveError> {
     let mut session = match &request.hierarchy {
-        Some(settings) => Session::hierarchical(&scene, settings, request, progress)?,
+        Some(_) => Session::hierarchical(&scene, request, progress)?,
         None => {
             let start = Instant::now();
             let mesh = Mesh::build(&scene, request.patches);
@@ -296,9 +296,12 @@ impl Session {
         Ok(Session::assemble(scene.clone(), mesh.clone(), Transfer::Dense(form_factors), request, seconds, vec![Rgb::ZERO; n]))
     }
 
-    /// Builds the element and link hierarchy of `scene` (which also decides the patches: the
-    /// leaves); [`Session::solve`] then finishes from the refinement's last solution.
-    pub fn hierarchical(scene: &Scene, settings: &HierarchySettings, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<Session, SolveError> {
+    /// Builds the element and link hierarchy of `scene` with `request.hierarchy`'s settings (the
+    /// defaults if it names none), which also decides the patches: the leaves.
+    /// [`Session::solve`] then finishes from the refinement's last solution.
+    pub fn hierarchical(scene: &Scene, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<Session, SolveError> {
+        let settings = request.hierarchy.unwrap_or_default();
+        let request = &SolveRequest { hierarchy: Some(settings), ..*request };
         if request.solver.method.needs_entries() {
             return Err(NeedsEntries(request.solver.method).into());
         }
@@ -307,7 +310,7 @@ impl Session {
         let occluders = Occluders::new(scene);
         seconds.mesh = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let (hierarchy, radiosity) = Hierarchy::build(scene, &occluders, settings, request.form_factors, &request.solver, progress)?;
+        let (hierarchy, radiosity) = Hierarchy::build(scene, &occluders, &settings, request.form_factors, &request.solver, progress)?;
         seconds.form_factors = clock.elapsed().as_secs_f64();
         let mesh = hierarchy.leaf_mesh();
         Ok(Session::assemble(scene.clone(), mesh, Transfer::Hierarchy(Box::new(hierarchy)), request, seconds, radiosity))
