@@ -72,7 +72,7 @@ const MAX_DEPTH: u32 = 20;
 const CLUSTER_SAMPLES: u32 = 16;
 /// Faces in a shaft tested as a single blocker before rays decide.
 const MAX_BLOCKER_CANDIDATES: usize = 4;
-/// Source points per receiver point for the transfer centre of a clear link.
+/// Source points per receiver point for the transfer centre of a clear link ([`kernel_centre`]).
 const CENTROID_SAMPLES: u32 = 8;
 /// Cosine-distributed rays per point for the buried test ([`is_buried`]).
 const BURIED_RAYS: u32 = 8;
@@ -388,7 +388,7 @@ impl Refiner<'_> {
         }
         let offset = match (&s.element, estimate.visibility) {
             (Some(e), Visibility::Partial | Visibility::Clear) => {
-                let centroid = estimate.centroid.unwrap_or_else(|| self.sampled_visibility(receiver, source, 1, CENTROID_SAMPLES, false).3);
+                let centroid = estimate.centroid.unwrap_or_else(|| kernel_centre(&r.element.as_ref().expect("links end at elements").patch, &e.patch, pair_seed(receiver as usize, source as usize)));
                 tangent_coordinates(&e.patch, centroid)
             }
             _ => [0.0; 2],
@@ -426,7 +426,7 @@ impl Refiner<'_> {
             // Partly hidden: what counts is how much visibility varies over the receiver, not
             // the whole factor (a source hidden alike from every receiver point needs no split).
             let rays_per_point = rays_for_pair(p, q, &self.rays).max(4);
-            let (occluded, least, most, centroid) = self.sampled_visibility(receiver, source, integration_level(p, q, factor, high - low).min(2), rays_per_point, true);
+            let (occluded, least, most, centroid) = self.partly_hidden_factor(receiver, source, integration_level(p, q, factor, high - low).min(2), rays_per_point);
             return Some(Estimate { factor: occluded, spread: high - low + factor * (most - least), visibility, centroid: Some(centroid) });
         }
         // A cluster takes part: cull by facing, then bound the factor by the source's area seen
@@ -504,9 +504,8 @@ impl Refiner<'_> {
     /// quadrature point, the analytic factor times the kernel-weighted share of clear rays to
     /// stratified source points. The weights matter: where a receiver meets a wall the kernel
     /// peaks just where nothing blocks, and `unoccluded factor x clear share` ran 16-30% low
-    /// there (measured on the Cornell box, docs/ACCURACY.md). Without `test_rays` every point
-    /// counts as clear (for the centroid of a clear pair).
-    fn sampled_visibility(&self, receiver: u32, source: u32, level: u32, rays_per_point: u32, test_rays: bool) -> (f64, f64, f64, DVec3) {
+    /// there (measured on the Cornell box, docs/ACCURACY.md).
+    fn partly_hidden_factor(&self, receiver: u32, source: u32, level: u32, rays_per_point: u32) -> (f64, f64, f64, DVec3) {
         let (p, q) = (&self.node(receiver).element.as_ref().expect("an element").patch, &self.node(source).element.as_ref().expect("an element").patch);
         let seed = pair_seed(receiver as usize, source as usize);
         let (mut factor, mut point, mut cast, mut least, mut most) = (0.0, 0u32, 0u64, 1.0f64, 0.0f64);
@@ -528,10 +527,8 @@ impl Refiner<'_> {
                     continue;
                 }
                 total += kernel;
-                if !test_rays || {
-                    cast += 1;
-                    self.occluders.segment_is_clear(x, y, [p.face, q.face])
-                } {
+                cast += 1;
+                if self.occluders.segment_is_clear(x, y, [p.face, q.face]) {
                     clear += kernel;
                     clear_points += y * kernel;
                 }
@@ -1081,6 +1078,24 @@ fn split_side(r: &Node, s: &Node, (receiver_error, source_error): (f64, f64), to
         (false, true) => Some(false),
         (false, false) => None,
     }
+}
+
+/// The kernel-weighted mean of `q`'s points seen from `p` with nothing between: the receiver's
+/// quadrature points against [`CENTROID_SAMPLES`] stratified source points each.
+fn kernel_centre(p: &Patch, q: &Patch, seed: u64) -> DVec3 {
+    let (mut sum, mut total, mut point) = (DVec3::ZERO, 0.0, 0u64);
+    p.polygon.for_each_quadrature_point(1, |x, weight| {
+        point += 1;
+        for k in 0..CENTROID_SAMPLES {
+            let (s, t) = stratified_uv(k, splitmix64(seed ^ point));
+            let y = q.polygon.point_at(s, t);
+            let d = y - x;
+            // cos_p cos_q / d^2, from unnormalised dot products.
+            let kernel = weight * p.normal.dot(d).max(0.0) * (-q.normal.dot(d)).max(0.0) / d.length_squared().powi(2);
+            (sum, total) = (sum + y * kernel, total + kernel);
+        }
+    });
+    if total > 0.0 { sum / total } else { q.centroid }
 }
 
 /// `point` relative to `patch`'s centroid in the patch's tangent frame.
