@@ -521,8 +521,7 @@ impl Refiner<'_> {
                 let (s, t) = stratified_uv(k, splitmix64(seed ^ point as u64));
                 let y = q.polygon.point_at(s, t);
                 let d = y - x;
-                // cos_p cos_q / d^2, from unnormalised dot products.
-                let kernel = p.normal.dot(d).max(0.0) * (-q.normal.dot(d)).max(0.0) / d.length_squared().powi(2);
+                let kernel = facing_kernel(p.normal, q.normal, d);
                 if kernel == 0.0 {
                     continue;
                 }
@@ -1080,6 +1079,13 @@ fn split_side(r: &Node, s: &Node, (receiver_error, source_error): (f64, f64), to
     }
 }
 
+/// `cos_p cos_q / d^2` between points with normals `np` and `nq` and `d` from the first to the
+/// second (the form factor kernel without its 1/pi), from unnormalised dot products; zero when
+/// either faces away.
+fn facing_kernel(np: DVec3, nq: DVec3, d: DVec3) -> f64 {
+    np.dot(d).max(0.0) * (-nq.dot(d)).max(0.0) / d.length_squared().powi(2)
+}
+
 /// The kernel-weighted mean of `q`'s points seen from `p` with nothing between: the receiver's
 /// quadrature points against [`CENTROID_SAMPLES`] stratified source points each.
 fn kernel_centre(p: &Patch, q: &Patch, seed: u64) -> DVec3 {
@@ -1090,8 +1096,7 @@ fn kernel_centre(p: &Patch, q: &Patch, seed: u64) -> DVec3 {
             let (s, t) = stratified_uv(k, splitmix64(seed ^ point));
             let y = q.polygon.point_at(s, t);
             let d = y - x;
-            // cos_p cos_q / d^2, from unnormalised dot products.
-            let kernel = weight * p.normal.dot(d).max(0.0) * (-q.normal.dot(d)).max(0.0) / d.length_squared().powi(2);
+            let kernel = weight * facing_kernel(p.normal, q.normal, d);
             (sum, total) = (sum + y * kernel, total + kernel);
         }
     });
