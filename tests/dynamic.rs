@@ -4,7 +4,7 @@
 use futures_util::StreamExt;
 use server::solving::{prepare, serve_edits, shared_for, solve_and_publish};
 use server::{Limits, Shared, routes};
-use solver::{MethodChoice, PatchTarget, Rgb, SolveRequest};
+use solver::{HierarchySettings, MethodChoice, PatchTarget, Rgb, SolveRequest};
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
@@ -264,7 +264,7 @@ async fn moving_an_object_sends_new_geometry_and_colours_of_the_moved_scene() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_hierarchical_server_streams_its_leaves_and_new_leaves_after_a_move() {
-    let hierarchical = || SolveRequest::default().with_method(MethodChoice::Hierarchical, 0.2);
+    let hierarchical = || SolveRequest::default().with_method(MethodChoice::Hierarchical, HierarchySettings { error: 0.2, ..HierarchySettings::default() });
     let solve = |scene: solver::Scene| {
         let solved = solver::solve_scene(scene, &hierarchical(), &solver::no_progress).unwrap();
         (solved.mesh.patches.len(), solved.radiosity.iter().map(|b| b.as_vec3().to_array()).collect::<Vec<[f32; 3]>>())

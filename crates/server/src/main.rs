@@ -28,6 +28,9 @@ struct Args {
     /// With --method hierarchical: the relative error a link may carry; smaller refines more.
     #[arg(long, env = "RADCAST_ERROR", default_value_t = HierarchySettings::default().error)]
     error: f64,
+    /// With --method hierarchical: leaves at most (bounds memory, about 2.3 KB a leaf).
+    #[arg(long, env = "RADCAST_MAX_LEAVES", default_value_t = HierarchySettings::default().max_leaves)]
+    max_leaves: usize,
     /// Relative residual to stop at.
     #[arg(long, env = "RADCAST_TOLERANCE", default_value_t = 1e-6)]
     tolerance: f64,
@@ -77,13 +80,14 @@ async fn main() -> anyhow::Result<()> {
     anyhow::ensure!(args.patches > 0, "--patches must be at least 1");
     anyhow::ensure!(args.tolerance > 0.0 && args.tolerance < 1.0, "--tolerance must be in (0, 1), got {}", args.tolerance);
     anyhow::ensure!(args.error > 0.0 && args.error < 1.0, "--error must be in (0, 1), got {}", args.error);
+    anyhow::ensure!(args.max_leaves > 0, "--max-leaves must be at least 1");
     let request = SolveRequest {
         patches: PatchTarget::Count(args.patches),
         form_factors: FormFactorSettings::default(),
         solver: SolverSettings { tolerance: args.tolerance, ..SolverSettings::default() },
         ..SolveRequest::default()
     }
-    .with_method(args.method, args.error);
+    .with_method(args.method, HierarchySettings { error: args.error, max_leaves: args.max_leaves, ..HierarchySettings::default() });
     let limits = Limits {
         max_viewers: args.max_viewers,
         max_viewers_per_ip: args.max_viewers_per_ip,

@@ -72,11 +72,11 @@ impl std::fmt::Display for MethodChoice {
 }
 
 impl SolveRequest {
-    /// This request solved by `choice`; `error` is the hierarchical path's knob.
-    pub fn with_method(self, choice: MethodChoice, error: f64) -> SolveRequest {
+    /// This request solved by `choice`; `hierarchy` applies if that is the hierarchical path.
+    pub fn with_method(self, choice: MethodChoice, hierarchy: HierarchySettings) -> SolveRequest {
         let (method, hierarchy) = match choice {
             MethodChoice::Dense(method) => (method, None),
-            MethodChoice::Hierarchical => (crate::solve::Method::Gmres, Some(HierarchySettings { error, ..HierarchySettings::default() })),
+            MethodChoice::Hierarchical => (crate::solve::Method::Gmres, Some(hierarchy)),
         };
         SolveRequest { solver: SolverSettings { method, ..self.solver }, hierarchy, ..self }
     }

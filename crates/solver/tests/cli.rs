@@ -99,3 +99,30 @@ fn bench_error_writes_its_table_and_plot_under_the_given_name() {
     assert!(std::fs::read_to_string(folder.join("slab-check.svg")).expect("the plot is written").starts_with("<svg"));
     std::fs::remove_dir_all(&folder).unwrap();
 }
+
+#[test]
+fn a_leaf_budget_coarsens_the_knob_and_says_so() {
+    let solve = |error: &str, extra: &[&str]| {
+        let output = radcast(&[&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--json", "--error", error], extra].concat());
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let report: serde_json::Value = serde_json::from_slice(&output.stdout).expect("one JSON object on stdout");
+        (report, String::from_utf8_lossy(&output.stderr).into_owned())
+    };
+    let (free, quiet) = solve("0.1", &[]);
+    assert_eq!((free["knob_used"].as_f64(), free["leaf_budget_reached"].as_bool()), (Some(0.1), Some(false)));
+    assert!(!quiet.contains("warning"), "{quiet}");
+    // Half the leaves the knob wants: the whole refinement runs again at 0.2, within budget.
+    let budget = free["elements"].as_u64().unwrap() / 2;
+    let (bounded, warned) = solve("0.1", &["--max-leaves", &budget.to_string()]);
+    assert_eq!((bounded["knob_used"].as_f64(), bounded["leaf_budget_reached"].as_bool()), (Some(0.2), Some(false)));
+    assert!(bounded["elements"].as_u64().unwrap() <= budget);
+    assert!(warned.contains(&format!("warning: --error 0.1 needs more than --max-leaves {budget} leaves here; refined at --error 0.2 instead")), "{warned}");
+    // Past a knob of 0.5 there is nothing coarser to try: elements stop splitting at the budget.
+    let (frozen, warned) = solve("0.6", &["--max-leaves", "60"]);
+    assert_eq!((frozen["knob_used"].as_f64(), frozen["leaf_budget_reached"].as_bool()), (Some(0.6), Some(true)));
+    assert!(frozen["elements"].as_u64().unwrap() <= 60);
+    assert!(warned.contains("warning: refinement stopped at --max-leaves 60 even at --error 0.6"), "{warned}");
+    let refused = radcast(&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--max-leaves", "0"]);
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--max-leaves must be at least 1"));
+}

@@ -37,6 +37,10 @@ enum Command {
         /// With --method hierarchical: the relative error a link may carry; smaller refines more.
         #[arg(long, default_value_t = HierarchySettings::default().error)]
         error: f64,
+        /// With --method hierarchical: leaves at most (bounds memory, about 2.3 KB a leaf); the
+        /// JSON says `leaf_budget_reached` when refinement stopped there.
+        #[arg(long, default_value_t = HierarchySettings::default().max_leaves)]
+        max_leaves: usize,
         /// Print one JSON object on stdout instead of the table.
         #[arg(long)]
         json: bool,
@@ -134,10 +138,13 @@ struct Settings {
 }
 
 impl Settings {
-    /// The request; `error` is the hierarchical knob.
-    fn request(&self, error: f64) -> anyhow::Result<SolveRequest> {
-        if !(error > 0.0 && error < 1.0) {
-            bail!("--error must be in (0, 1), got {error}");
+    /// The request; `hierarchy` applies to the hierarchical method.
+    fn request(&self, hierarchy: HierarchySettings) -> anyhow::Result<SolveRequest> {
+        if !(hierarchy.error > 0.0 && hierarchy.error < 1.0) {
+            bail!("--error must be in (0, 1), got {}", hierarchy.error);
+        }
+        if hierarchy.max_leaves == 0 {
+            bail!("--max-leaves must be at least 1");
         }
         let patches = match self.patch_size {
             Some(size) if size.is_finite() && size > 0.0 => PatchTarget::EdgeLength(size),
@@ -160,7 +167,7 @@ impl Settings {
             solver: SolverSettings { tolerance: self.tolerance, max_iterations: self.max_iterations, relaxation: self.omega, ..SolverSettings::default() },
             ..SolveRequest::default()
         };
-        Ok(request.with_method(self.method, error))
+        Ok(request.with_method(self.method, hierarchy))
     }
 }
 
@@ -197,8 +204,8 @@ impl ProgressPrinter {
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
-        Command::Solve { scene, settings, error, json, reference } => {
-            let request = settings.request(error)?;
+        Command::Solve { scene, settings, error, max_leaves, json, reference } => {
+            let request = settings.request(HierarchySettings { error, max_leaves, ..HierarchySettings::default() })?;
             let printer = ProgressPrinter::new();
             let reference = reference
                 .map(|path| -> anyhow::Result<Reference> {
@@ -207,10 +214,18 @@ fn main() -> anyhow::Result<()> {
                 })
                 .transpose()?;
             let solved = solve_file(&scene, &request, &|p| printer.report(p))?;
-            let error = reference.map(|r| evaluate(&solved.scene, &solved.mesh, &solved.radiosity, &r.probes));
+            let measured = reference.map(|r| evaluate(&solved.scene, &solved.mesh, &solved.radiosity, &r.probes));
             let report = &solved.report;
             if report.skipped_faces > 0 {
                 eprintln!("warning: {}: skipped {} zero-area faces", scene.display(), report.skipped_faces);
+            }
+            if let Some(stats) = report.hierarchy {
+                if stats.knob_used > error {
+                    eprintln!("warning: --error {error} needs more than --max-leaves {max_leaves} leaves here; refined at --error {} instead", stats.knob_used);
+                }
+                if stats.leaf_budget_reached {
+                    eprintln!("warning: refinement stopped at --max-leaves {max_leaves} even at --error {}; some links carry more than that", stats.knob_used);
+                }
             }
             if !report.converged {
                 eprintln!(
@@ -221,13 +236,13 @@ fn main() -> anyhow::Result<()> {
             if json {
                 let mut value = serde_json::to_value(report).context("serialising the report")?;
                 value["peak_memory_bytes"] = HEAP.peak_usage().into();
-                if let Some(error) = error {
-                    value["error"] = serde_json::to_value(error)?;
+                if let Some(measured) = measured {
+                    value["error"] = serde_json::to_value(measured)?;
                 }
                 println!("{value}");
             } else {
                 print_summary(&scene, report);
-                if let Some(e) = error {
+                if let Some(e) = measured {
                     println!(
                         "error       smooth RMS {:.4}, max {:.3}, energy {:+.4}; flat RMS {:.4}  ({} probes, reference noise {:.4})",
                         e.smooth.rms, e.smooth.max, e.smooth.energy, e.flat.rms, e.probes, e.reference_noise
@@ -318,7 +333,7 @@ fn bench(scene: &std::path::Path, counts: &[usize], repeat: usize, settings: &Se
     println!("| patches | load s | mesh s | form factors s | solve s | total s | iterations | rays |");
     println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
     for &count in counts {
-        let request = Settings { patches: count, patch_size: None, ..settings.clone() }.request(HierarchySettings::default().error)?;
+        let request = Settings { patches: count, patch_size: None, ..settings.clone() }.request(HierarchySettings::default())?;
         let mut runs = Vec::new();
         for _ in 0..repeat {
             runs.push(solve_file(scene, &request, &solver::no_progress)?.report);
