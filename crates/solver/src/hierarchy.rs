@@ -1026,32 +1026,11 @@ impl Hierarchy {
         solver: &SolverSettings,
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<(Hierarchy, Vec<Rgb>), NeedsEntries> {
-        let mut knob = settings.error;
-        loop {
-            // Over the budget, the whole refinement again at twice the knob: stopping one part-way
-            // leaves whichever elements came first fine and the rest coarse (the furnished room
-            // at knob 0.03 stopped so ran 17% RMS; refined at 0.2 it runs 9%).
-            let may_coarsen = 2.0 * knob < 1.0;
-            let (mut hierarchy, radiosity) = Hierarchy::refined(scene, occluders, &HierarchySettings { error: knob, ..*settings }, rays, solver, progress, may_coarsen)?;
-            if !(may_coarsen && hierarchy.stats.leaf_budget_reached) {
-                hierarchy.stats.knob_used = knob;
-                return Ok((hierarchy, radiosity));
-            }
-            knob *= 2.0;
-        }
-    }
-
-    /// [`Hierarchy::build`] at `settings.error`; with `abandon`, it stops as soon as the leaf
-    /// budget would be passed (and says so in its stats).
-    fn refined(
-        scene: &Scene,
-        occluders: &Occluders,
-        settings: &HierarchySettings,
-        rays: FormFactorSettings,
-        solver: &SolverSettings,
-        progress: &(dyn Fn(Progress) + Sync),
-        abandon: bool,
-    ) -> Result<(Hierarchy, Vec<Rgb>), NeedsEntries> {
+        // Over the leaf budget, the whole refinement again at twice the knob: stopping one
+        // part-way leaves whichever elements came first fine and the rest coarse (the furnished
+        // room at knob 0.03 stopped so ran 17% RMS; refined at 0.2 it runs 9%). Past 0.5 there
+        // is nothing coarser to try, and elements stop splitting instead.
+        let abandon = 2.0 * settings.error < 1.0;
         let mut hierarchy = Hierarchy::new(scene);
         hierarchy.face_closed = hierarchy
             .face_node
@@ -1101,7 +1080,7 @@ impl Hierarchy {
             hierarchy.stats.shaft_decided += shaft_decided;
             hierarchy.stats.rounds = round + 1;
             if abandon && hierarchy.stats.leaf_budget_reached {
-                break;
+                return Hierarchy::build(scene, occluders, &HierarchySettings { error: 2.0 * settings.error, ..*settings }, rays, solver, progress);
             }
             // New leaves start from their parent's value.
             inherited.resize(hierarchy.nodes.len(), Rgb::ZERO);
@@ -1111,6 +1090,7 @@ impl Hierarchy {
             hierarchy.index(occluders);
             radiosity = hierarchy.leaves.iter().map(|&n| inherited[n as usize]).collect();
         }
+        hierarchy.stats.knob_used = settings.error;
         Ok((hierarchy, radiosity))
     }
 }
