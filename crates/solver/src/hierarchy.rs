@@ -399,7 +399,7 @@ impl Refiner<'_> {
         }
         let offset = match (&s.element, estimate.visibility) {
             (Some(e), Visibility::Partial | Visibility::Clear) => {
-                let centroid = estimate.centroid.unwrap_or_else(|| kernel_centre(&r.element.as_ref().expect("links end at elements").patch, &e.patch, pair_seed(receiver as usize, source as usize)));
+                let centroid = estimate.centroid.unwrap_or_else(|| kernel_centre(self.hierarchy.element_patch(receiver), &e.patch, pair_seed(receiver as usize, source as usize)));
                 tangent_coordinates(&e.patch, centroid)
             }
             _ => [0.0; 2],
@@ -517,7 +517,7 @@ impl Refiner<'_> {
     /// peaks just where nothing blocks, and `unoccluded factor x clear share` ran 16-30% low
     /// there (measured on the Cornell box, docs/ACCURACY.md).
     fn partly_hidden_factor(&self, receiver: u32, source: u32, level: u32, rays_per_point: u32) -> (f64, f64, f64, DVec3) {
-        let (p, q) = (&self.node(receiver).element.as_ref().expect("an element").patch, &self.node(source).element.as_ref().expect("an element").patch);
+        let (p, q) = (self.hierarchy.element_patch(receiver), self.hierarchy.element_patch(source));
         let seed = pair_seed(receiver as usize, source as usize);
         let (mut factor, mut point, mut cast, mut least, mut most) = (0.0, 0u32, 0u64, 1.0f64, 0.0f64);
         let (mut centroid_sum, mut centroid_weight) = (DVec3::ZERO, 0.0);
@@ -566,13 +566,16 @@ impl Refiner<'_> {
             let (x, nx, fx) = self.hierarchy.sample(receiver, k, seed);
             let (y, ny, fy) = self.hierarchy.sample(source, k, splitmix64(seed));
             let d = y - x;
-            let (cos_x, cos_y, d2) = (nx.dot(d), -ny.dot(d), d.length_squared());
-            if cos_x <= 0.0 || cos_y <= 0.0 || d2 == 0.0 {
+            if d == DVec3::ZERO {
+                continue;
+            }
+            let kernel = facing_kernel(nx, ny, d);
+            if kernel == 0.0 {
                 continue;
             }
             self.rays_cast.fetch_add(1, Ordering::Relaxed);
             if self.occluders.segment_is_clear(x, y, [fx, fy]) {
-                sum += cos_x * cos_y / (PI * d2 * d2);
+                sum += kernel / PI;
             }
         }
         (self.node(source).area * sum / CLUSTER_SAMPLES as f64).min(1.0)
@@ -661,6 +664,17 @@ impl Hierarchy {
     /// What refinement and solving cost so far.
     pub fn stats(&self) -> HierarchyStats {
         self.stats
+    }
+
+    /// The patch of node `n`, which must be an element (a leaf, a face or a piece of one).
+    fn element_patch(&self, n: u32) -> &Patch {
+        &self.nodes[n as usize].element.as_ref().expect("an element, not a cluster").patch
+    }
+
+    /// Whether node `n` is an element not split yet: splitting it adds three leaves.
+    fn is_unsplit_element(&self, n: u32) -> bool {
+        let node = &self.nodes[n as usize];
+        node.element.is_some() && node.child_count == 0
     }
 
     /// Splits element `n` into four (once).
@@ -776,8 +790,7 @@ impl Hierarchy {
                 Decision::SplitSource => s,
                 _ => continue,
             };
-            let node = &self.nodes[n as usize];
-            if node.element.is_some() && node.child_count == 0 {
+            if self.is_unsplit_element(n) {
                 indices.push(i);
                 if !std::mem::replace(&mut marked[n as usize], true) {
                     added += 3;
@@ -789,7 +802,7 @@ impl Hierarchy {
 
     /// Subdivides `n` if it is an element, giving new children their parent's radiosity.
     fn split_for(&mut self, n: u32, radiosity: &mut Vec<f64>, spread: &mut Vec<f64>) {
-        if self.nodes[n as usize].element.is_some() && self.nodes[n as usize].child_count == 0 {
+        if self.is_unsplit_element(n) {
             self.subdivide(n);
             let (b, d) = (radiosity[n as usize], spread[n as usize]);
             radiosity.resize(self.nodes.len(), b);
@@ -842,7 +855,8 @@ impl Hierarchy {
     /// Per node, its sent radiosity's slope along its tangent frame (see [`Slope`]). A link
     /// centred off the centre then gathers what that part of the source sends, not the mean:
     /// where a source is bright just where the receiver sees it best, the mean ran links low
-    /// (the Cornell floor under its lamp; energy -2.3% at knob 0.02, -0.6% with slopes).
+    /// (the Cornell floor under its lamp; energy -2.3% at knob 0.02, -0.9% with slopes read
+    /// within their reach).
     fn slopes_of(&self, means: &[Rgb]) -> Vec<[Rgb; 2]> {
         (0..self.nodes.len())
             .into_par_iter()
@@ -902,7 +916,7 @@ impl Hierarchy {
         let shares: Vec<f64> = unmeasured
             .par_iter()
             .map(|&n| {
-                let patch = &self.nodes[n as usize].element.as_ref().expect("leaves are elements").patch;
+                let patch = self.element_patch(n);
                 let mut share = 0.0;
                 let mut point = 0;
                 patch.polygon.for_each_quadrature_point(1, |x, weight| {
@@ -967,7 +981,7 @@ impl Hierarchy {
         let mut sums = vec![Rgb::ZERO; self.leaves.len()];
         self.gather(&vec![Rgb::ONE; self.leaves.len()], &mut sums);
         for (i, &leaf) in self.leaves.iter().enumerate() {
-            let face = self.nodes[leaf as usize].element.as_ref().expect("leaves are elements").patch.face;
+            let face = self.element_patch(leaf).face;
             if self.face_closed[face as usize] && sums[i].x > 0.0 {
                 self.row_scale[i] = 1.0 / sums[i].x;
             }
@@ -977,7 +991,7 @@ impl Hierarchy {
     }
 
     fn leaf_patch(&self, i: usize) -> &Patch {
-        &self.nodes[self.leaves[i] as usize].element.as_ref().expect("leaves are elements").patch
+        self.element_patch(self.leaves[i])
     }
 
     /// The leaves as a mesh: face by face, corners shared between the leaves of a face.
@@ -1036,7 +1050,7 @@ impl Hierarchy {
             .face_node
             .par_iter()
             .enumerate()
-            .map(|(face, &n)| sees_closed_view(&hierarchy.nodes[n as usize].element.as_ref().expect("faces are elements").patch, face, occluders))
+            .map(|(face, &n)| sees_closed_view(hierarchy.element_patch(n), face, occluders))
             .collect();
         hierarchy.index(occluders);
         let smallest = MIN_RADIUS_PER_ERROR * settings.error;
@@ -1063,9 +1077,9 @@ impl Hierarchy {
                 // Links that the new solution shows too coarse go back to refinement; only
                 // those that can still be split count as changes.
                 let node = |n: u32| &hierarchy.nodes[n as usize];
+                let smallest = smallest_while(hierarchy.stats.leaf_budget_reached, smallest);
                 let (redo, keep): (Vec<Link>, Vec<Link>) = hierarchy.links.par_iter().partition(|l| {
                     let source = (node_radiosity[l.source as usize], node_spread[l.source as usize]);
-                    let smallest = smallest_while(hierarchy.stats.leaf_budget_reached, smallest);
                     split_side(node(l.receiver), node(l.source), link_errors(node(l.receiver), source, l.factor as f64, l.spread as f64), tolerance, smallest).is_some()
                 });
                 if redo.is_empty() {
@@ -1378,7 +1392,7 @@ mod tests {
             hierarchy.subdivide(child);
         }
         hierarchy.index(&Occluders::new(&scene));
-        let (tangent, bitangent) = hierarchy.nodes[wall as usize].element.as_ref().expect("an element").patch.normal.any_orthonormal_pair();
+        let (tangent, bitangent) = hierarchy.element_patch(wall).normal.any_orthonormal_pair();
         let centroid = hierarchy.nodes[wall as usize].centroid;
         let linear = |p: DVec3| 3.0 + 0.5 * (p - centroid).dot(tangent) - 0.25 * (p - centroid).dot(bitangent);
         let radiosity: Vec<Rgb> = hierarchy.leaves.iter().map(|&n| Rgb::splat(linear(hierarchy.nodes[n as usize].centroid))).collect();
