@@ -348,6 +348,14 @@ impl Session {
         &self.mesh
     }
 
+    /// The hierarchy's statistics, for a hierarchical session.
+    fn hierarchy_stats(&self) -> Option<HierarchyStats> {
+        match &self.transfer {
+            Transfer::Dense(_) => None,
+            Transfer::Hierarchy(hierarchy) => Some(hierarchy.stats()),
+        }
+    }
+
     fn object_index(&self, name: &str) -> Result<u32, EditError> {
         self.objects.iter().position(|o| o == name).map(|i| i as u32).ok_or_else(|| EditError::UnknownObject(name.into()))
     }
@@ -374,9 +382,9 @@ impl Session {
         let mut swept = corners(&self.scene);
         self.scene.translate_object(object, offset);
         swept.extend(corners(&self.scene));
-        let occluders = Occluders::new(&self.scene);
         match &mut self.transfer {
             Transfer::Dense(form_factors) => {
+                let occluders = Occluders::new(&self.scene);
                 self.mesh.translate_object(object, offset);
                 let moved: Vec<bool> = self.patch_objects.iter().map(|o| *o == object).collect();
                 let stats = form_factors.update_moved(&self.mesh, &occluders, &moved, crate::geometry::bounds(swept));
@@ -385,13 +393,11 @@ impl Session {
             Transfer::Hierarchy(_) => {
                 // Refinement depends on where light falls, so the hierarchy is built again: new
                 // leaves, which viewers get as a new geometry.
-                let settings = self.request.hierarchy.unwrap_or_default();
-                let (hierarchy, radiosity) = Hierarchy::build(&self.scene, &occluders, &settings, self.request.form_factors, &self.request.solver, &no_progress)
-                    .expect("Session::hierarchical refuses per-patch methods");
-                let (links, leaves) = (hierarchy.stats().links, hierarchy.stats().elements);
-                let (scene, request, seconds) = (std::mem::take(&mut self.scene), self.request, self.seconds);
-                *self = Session::assemble(scene, hierarchy.leaf_mesh(), Transfer::Hierarchy(Box::new(hierarchy)), &request, seconds, radiosity);
-                Ok(MoveReport { pairs: links, rows: leaves, entries: links, seconds: clock.elapsed().as_secs_f64() })
+                let seconds = self.seconds;
+                *self = Session::hierarchical(&self.scene, &self.request, &no_progress).expect("this session's method already ran on a hierarchy");
+                self.seconds = seconds;
+                let stats = self.hierarchy_stats().expect("a hierarchical session");
+                Ok(MoveReport { pairs: stats.links, rows: stats.elements, entries: stats.links, seconds: clock.elapsed().as_secs_f64() })
             }
         }
     }
@@ -508,10 +514,7 @@ impl Session {
                 .zip(area.iter().zip(&power))
                 .map(|(name, (a, p))| ObjectRadiosity { name: name.clone(), area: *a, radiosity: if *a > 0.0 { (*p / *a).to_array() } else { [0.0; 3] } })
                 .collect(),
-            hierarchy: match &self.transfer {
-                Transfer::Dense(_) => None,
-                Transfer::Hierarchy(hierarchy) => Some(hierarchy.stats()),
-            },
+            hierarchy: self.hierarchy_stats(),
         }
     }
 }
