@@ -169,12 +169,7 @@ pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option
     *shared.metrics.solve_seconds.lock().expect("metrics lock") = vec![("mesh", s.mesh), ("form_factors", s.form_factors), ("solve", s.solve), ("total", s.total)];
     tracing::info!(patches = report.patches, iterations = report.iterations, residual = report.residual, seconds = s.total, "solved");
     if let (Some(asked), Some(stats)) = (prepared.request.hierarchy, report.hierarchy) {
-        if stats.knob_used > asked.error {
-            tracing::warn!(asked = asked.error, used = stats.knob_used, max_leaves = asked.max_leaves, "the error knob needed more leaves than the budget; refined at a coarser one");
-        }
-        if stats.leaf_budget_reached {
-            tracing::warn!(max_leaves = asked.max_leaves, "refinement stopped at the leaf budget");
-        }
+        stats.budget_warnings(&asked).iter().for_each(|warning| tracing::warn!("{warning}"));
     }
     let report_json = serde_json::to_string(&report)?;
     // The report goes in before the final frame: a viewer that sees "final" may ask for it at once.

@@ -175,6 +175,22 @@ pub struct HierarchyStats {
     pub leaf_budget_reached: bool,
 }
 
+impl HierarchyStats {
+    /// What a user who asked for `asked` should be told about the leaf budget: that the knob was
+    /// coarsened to fit it, or that refinement stopped at it (flag names as the `radcast`
+    /// command and the server spell them).
+    pub fn budget_warnings(&self, asked: &HierarchySettings) -> Vec<String> {
+        let mut warnings = Vec::new();
+        if self.knob_used > asked.error {
+            warnings.push(format!("--error {} needs more than --max-leaves {} leaves here; refined at --error {} instead", asked.error, asked.max_leaves, self.knob_used));
+        }
+        if self.leaf_budget_reached {
+            warnings.push(format!("refinement stopped at --max-leaves {} even at --error {}; some links carry more than that", asked.max_leaves, self.knob_used));
+        }
+        warnings
+    }
+}
+
 /// The element and cluster trees of a scene, their links, and the link operator on the leaves.
 pub struct Hierarchy {
     nodes: Vec<Node>,

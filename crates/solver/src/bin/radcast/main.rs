@@ -219,13 +219,8 @@ fn main() -> anyhow::Result<()> {
             if report.skipped_faces > 0 {
                 eprintln!("warning: {}: skipped {} zero-area faces", scene.display(), report.skipped_faces);
             }
-            if let Some(stats) = report.hierarchy {
-                if stats.knob_used > error {
-                    eprintln!("warning: --error {error} needs more than --max-leaves {max_leaves} leaves here; refined at --error {} instead", stats.knob_used);
-                }
-                if stats.leaf_budget_reached {
-                    eprintln!("warning: refinement stopped at --max-leaves {max_leaves} even at --error {}; some links carry more than that", stats.knob_used);
-                }
+            if let (Some(asked), Some(stats)) = (request.hierarchy, report.hierarchy) {
+                stats.budget_warnings(&asked).iter().for_each(|warning| eprintln!("warning: {warning}"));
             }
             if !report.converged {
                 eprintln!(
