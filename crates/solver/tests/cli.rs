@@ -10,11 +10,17 @@ fn radcast(args: &[&str]) -> std::process::Output {
         .expect("radcast runs")
 }
 
+/// Runs a command that must succeed and print one JSON object; returns it and the stderr text.
+fn radcast_json(args: &[&str]) -> (serde_json::Value, String) {
+    let output = radcast(args);
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(output.status.success(), "{stderr}");
+    (serde_json::from_slice(&output.stdout).expect("one JSON object on stdout"), stderr)
+}
+
 #[test]
 fn solve_json_reports_every_promised_field() {
-    let output = radcast(&["solve", "scenes/cornell-box.obj", "--patches", "200", "--method", "gauss-seidel", "--json"]);
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    let report: serde_json::Value = serde_json::from_slice(&output.stdout).expect("one JSON object on stdout");
+    let (report, _) = radcast_json(&["solve", "scenes/cornell-box.obj", "--patches", "200", "--method", "gauss-seidel", "--json"]);
     assert_eq!(report["method"], "gauss-seidel");
     assert!(report["patches"].as_u64().unwrap().abs_diff(200) <= 20, "{}", report["patches"]);
     assert_eq!(report["triangles"], 38);
@@ -61,9 +67,7 @@ fn bad_input_exits_non_zero_with_the_reason() {
 
 #[test]
 fn hierarchical_json_adds_elements_links_and_peak_memory() {
-    let output = radcast(&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--error", "0.2", "--json"]);
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    let report: serde_json::Value = serde_json::from_slice(&output.stdout).expect("one JSON object on stdout");
+    let (report, _) = radcast_json(&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--error", "0.2", "--json"]);
     assert_eq!(report["method"], "hierarchical");
     let (elements, links) = (report["elements"].as_u64().unwrap(), report["links"].as_u64().unwrap());
     // The leaves are the patches; each input face is at least one.
@@ -102,12 +106,7 @@ fn bench_error_writes_its_table_and_plot_under_the_given_name() {
 
 #[test]
 fn a_leaf_budget_coarsens_the_knob_and_says_so() {
-    let solve = |error: &str, extra: &[&str]| {
-        let output = radcast(&[&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--json", "--error", error], extra].concat());
-        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-        let report: serde_json::Value = serde_json::from_slice(&output.stdout).expect("one JSON object on stdout");
-        (report, String::from_utf8_lossy(&output.stderr).into_owned())
-    };
+    let solve = |error: &str, extra: &[&str]| radcast_json(&[&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--json", "--error", error], extra].concat());
     let (free, quiet) = solve("0.1", &[]);
     assert_eq!((free["knob_used"].as_f64(), free["leaf_budget_reached"].as_bool()), (Some(0.1), Some(false)));
     assert!(!quiet.contains("warning"), "{quiet}");
