@@ -4,12 +4,20 @@
 use yaml_rust2::{Yaml, YamlLoader};
 
 fn compose() -> Yaml {
-    let text = std::fs::read_to_string("docker-compose.yml").expect("docker-compose.yml at the top level");
-    YamlLoader::load_from_str(&text).expect("docker-compose.yml is valid YAML").remove(0)
+    let text =
+        std::fs::read_to_string("docker-compose.yml").expect("docker-compose.yml at the top level");
+    YamlLoader::load_from_str(&text)
+        .expect("docker-compose.yml is valid YAML")
+        .remove(0)
 }
 
 fn command(service: &Yaml) -> Vec<String> {
-    service["command"].as_vec().expect("every service has an exec-form command").iter().map(|w| w.as_str().expect("string words").to_string()).collect()
+    service["command"]
+        .as_vec()
+        .expect("every service has an exec-form command")
+        .iter()
+        .map(|w| w.as_str().expect("string words").to_string())
+        .collect()
 }
 
 #[test]
@@ -19,19 +27,36 @@ fn compose_names_the_server_viewers_and_load_tester() {
     let names: Vec<&str> = services.keys().filter_map(Yaml::as_str).collect();
     assert_eq!(names, ["server", "viewers", "load"]);
     let server = &doc["services"]["server"];
-    assert_eq!(server["build"].as_str(), Some("."), "the server builds from the top-level Dockerfile");
-    let image = server["image"].as_str().expect("the server names its image");
+    assert_eq!(
+        server["build"].as_str(),
+        Some("."),
+        "the server builds from the top-level Dockerfile"
+    );
+    let image = server["image"]
+        .as_str()
+        .expect("the server names its image");
     for name in ["viewers", "load"] {
         let service = &doc["services"][name];
-        assert_eq!(service["image"].as_str(), Some(image), "{name} runs the image the server builds");
-        assert_eq!(service["depends_on"]["server"]["condition"].as_str(), Some("service_healthy"), "{name} waits for the server");
+        assert_eq!(
+            service["image"].as_str(),
+            Some(image),
+            "{name} runs the image the server builds"
+        );
+        assert_eq!(
+            service["depends_on"]["server"]["condition"].as_str(),
+            Some("service_healthy"),
+            "{name} waits for the server"
+        );
         // Viewers reach the server by its service name on the port the image listens on.
         let words = command(service);
         let url = &words[words.iter().position(|w| w == "--url").expect("--url") + 1];
         assert_eq!(url, "ws://server:8080/ws");
     }
     for volume in ["cache", "renders"] {
-        assert!(!doc["volumes"][volume].is_badvalue(), "volume {volume} is declared");
+        assert!(
+            !doc["volumes"][volume].is_badvalue(),
+            "volume {volume} is declared"
+        );
     }
     assert!(command(&doc["services"]["viewers"]).contains(&"/renders/view.png".to_string()));
 }
@@ -39,7 +64,10 @@ fn compose_names_the_server_viewers_and_load_tester() {
 #[test]
 fn every_command_runs_a_binary_the_dockerfile_installs() {
     let dockerfile = std::fs::read_to_string("Dockerfile").expect("Dockerfile at the top level");
-    assert!(dockerfile.contains("ENV RADCAST_ADDR=0.0.0.0:8080"), "the image listens where compose maps");
+    assert!(
+        dockerfile.contains("ENV RADCAST_ADDR=0.0.0.0:8080"),
+        "the image listens where compose maps"
+    );
     assert!(dockerfile.contains("EXPOSE 8080"));
     let installed: Vec<&str> = dockerfile
         .lines()
@@ -51,10 +79,26 @@ fn every_command_runs_a_binary_the_dockerfile_installs() {
     let doc = compose();
     for (name, service) in doc["services"].as_hash().expect("services") {
         let words = command(service);
-        assert!(installed.contains(&words[0].as_str()), "{name:?} runs {}, which the image lacks", words[0]);
+        assert!(
+            installed.contains(&words[0].as_str()),
+            "{name:?} runs {}, which the image lacks",
+            words[0]
+        );
         // Each binary is a package of this workspace.
-        let package = if words[0] == "radcast" { "radcast-solver" } else { words[0].as_str() };
-        let manifest = std::fs::read_to_string(format!("crates/{}/Cargo.toml", package.trim_start_matches("radcast-"))).expect("crate exists");
-        assert!(manifest.contains(&format!("name = \"{}\"", words[0])), "{} is a binary of {package}", words[0]);
+        let package = if words[0] == "radcast" {
+            "radcast-solver"
+        } else {
+            words[0].as_str()
+        };
+        let manifest = std::fs::read_to_string(format!(
+            "crates/{}/Cargo.toml",
+            package.trim_start_matches("radcast-")
+        ))
+        .expect("crate exists");
+        assert!(
+            manifest.contains(&format!("name = \"{}\"", words[0])),
+            "{} is a binary of {package}",
+            words[0]
+        );
     }
 }

@@ -15,7 +15,10 @@ const TOKEN: &str = "s3cret";
 const PATIENCE: Duration = Duration::from_secs(60);
 
 fn request() -> SolveRequest {
-    SolveRequest { patches: PatchTarget::Count(300), ..SolveRequest::default() }
+    SolveRequest {
+        patches: PatchTarget::Count(300),
+        ..SolveRequest::default()
+    }
 }
 
 /// Ends the server's edit loop when a test ends, passing or failing: the loop runs on a
@@ -49,15 +52,25 @@ async fn live(scene: &str, request: SolveRequest) -> (SocketAddr, Arc<Shared>, E
 
 /// PUT with an optional bearer token; returns the status and the body.
 async fn put(address: SocketAddr, path: &str, token: Option<&str>, body: &str) -> (u16, String) {
-    let (url, body, token) = (format!("http://{address}{path}"), body.to_string(), token.map(str::to_string));
+    let (url, body, token) = (
+        format!("http://{address}{path}"),
+        body.to_string(),
+        token.map(str::to_string),
+    );
     tokio::task::spawn_blocking(move || {
-        let agent: ureq::Agent = ureq::Agent::config_builder().http_status_as_error(false).build().into();
+        let agent: ureq::Agent = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .build()
+            .into();
         let mut request = agent.put(&url).header("Content-Type", "application/json");
         if let Some(token) = token {
             request = request.header("Authorization", &format!("Bearer {token}"));
         }
         let mut response = request.send(body.as_bytes()).unwrap();
-        (response.status().as_u16(), response.body_mut().read_to_string().unwrap())
+        (
+            response.status().as_u16(),
+            response.body_mut().read_to_string().unwrap(),
+        )
     })
     .await
     .unwrap()
@@ -65,7 +78,9 @@ async fn put(address: SocketAddr, path: &str, token: Option<&str>, body: &str) -
 
 /// A viewer that keeps its buffer current; `wait_for` reads until a final frame satisfies `done`.
 struct Viewer {
-    socket: tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>,
+    socket: tokio_tungstenite::WebSocketStream<
+        tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
+    >,
     buffer: PatchBuffer,
     deltas: Vec<usize>,
     geometry_versions: Vec<u64>,
@@ -73,22 +88,33 @@ struct Viewer {
 
 impl Viewer {
     async fn connect(address: SocketAddr) -> Viewer {
-        let (socket, _) = tokio_tungstenite::connect_async(format!("ws://{address}/ws")).await.unwrap();
-        Viewer { socket, buffer: PatchBuffer::default(), deltas: Vec::new(), geometry_versions: Vec::new() }
+        let (socket, _) = tokio_tungstenite::connect_async(format!("ws://{address}/ws"))
+            .await
+            .unwrap();
+        Viewer {
+            socket,
+            buffer: PatchBuffer::default(),
+            deltas: Vec::new(),
+            geometry_versions: Vec::new(),
+        }
     }
 
     async fn wait_for(&mut self, done: impl Fn(&PatchBuffer) -> bool) {
         tokio::time::timeout(PATIENCE, async {
             while !(self.buffer.info.is_some_and(|i| i.is_final) && done(&self.buffer)) {
-                let Some(Ok(Message::Binary(bytes))) = self.socket.next().await else { continue };
+                let Some(Ok(Message::Binary(bytes))) = self.socket.next().await else {
+                    continue;
+                };
                 let message = ServerMessage::decode(&bytes).unwrap();
-                    if let ServerMessage::Delta(delta) = &message {
+                if let ServerMessage::Delta(delta) = &message {
                     self.deltas.push(delta.indices.len());
                 }
                 if let ServerMessage::GeometryChanged { geometry_version } = message {
                     self.geometry_versions.push(geometry_version);
                 }
-                self.buffer.apply(&message).expect("deltas apply to what the viewer holds");
+                self.buffer
+                    .apply(&message)
+                    .expect("deltas apply to what the viewer holds");
             }
         })
         .await
@@ -103,10 +129,22 @@ impl Viewer {
 /// The Cornell box solved from scratch with the light's emission replaced.
 fn from_scratch(light: [f64; 3]) -> Vec<[f32; 3]> {
     let mut scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
-    let light_object = scene.objects.iter().position(|o| o.name == "light").unwrap() as u32;
-    scene.faces.iter_mut().filter(|f| f.object == light_object).for_each(|f| f.emission = Rgb::from(light));
+    let light_object = scene
+        .objects
+        .iter()
+        .position(|o| o.name == "light")
+        .unwrap() as u32;
+    scene
+        .faces
+        .iter_mut()
+        .filter(|f| f.object == light_object)
+        .for_each(|f| f.emission = Rgb::from(light));
     let solved = solver::solve_scene(scene, &request(), &solver::no_progress).unwrap();
-    solved.radiosity.iter().map(|b| b.as_vec3().to_array()).collect()
+    solved
+        .radiosity
+        .iter()
+        .map(|b| b.as_vec3().to_array())
+        .collect()
 }
 
 /// Whether every patch is within two encodings (2^-9 each) and two solves (tolerance 1e-6) of
@@ -114,27 +152,44 @@ fn from_scratch(light: [f64; 3]) -> Vec<[f32; 3]> {
 fn mismatch(buffer: &PatchBuffer, expected: &[[f32; 3]]) -> Option<([f32; 3], [f32; 3])> {
     let got = buffer.radiosity();
     assert_eq!(got.len(), expected.len());
-    got.into_iter().zip(expected.iter().copied()).find(|(g, e)| {
-        let max = e.iter().cloned().fold(0.0, f32::max);
-        !g.iter().zip(e).all(|(a, b)| (a - b).abs() <= 2.0 * wire::rgb9e5::RELATIVE_ERROR_BOUND * max + 1e-6)
-    })
+    got.into_iter()
+        .zip(expected.iter().copied())
+        .find(|(g, e)| {
+            let max = e.iter().cloned().fold(0.0, f32::max);
+            !g.iter().zip(e).all(|(a, b)| {
+                (a - b).abs() <= 2.0 * wire::rgb9e5::RELATIVE_ERROR_BOUND * max + 1e-6
+            })
+        })
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_emission_change_reaches_every_viewer_as_a_delta_equal_to_a_fresh_solve() {
     let (address, _, _edit_loop) = live_cornell().await;
-    let mut viewers = vec![Viewer::connect(address).await, Viewer::connect(address).await];
+    let mut viewers = vec![
+        Viewer::connect(address).await,
+        Viewer::connect(address).await,
+    ];
     for v in &mut viewers {
         v.wait_for(|_| true).await;
     }
     let before = viewers[0].version();
-    let (status, body) = put(address, "/api/objects/light/emission", Some(TOKEN), r#"{"emission": [5, 4, 3]}"#).await;
+    let (status, body) = put(
+        address,
+        "/api/objects/light/emission",
+        Some(TOKEN),
+        r#"{"emission": [5, 4, 3]}"#,
+    )
+    .await;
     assert_eq!(status, 202, "{body}");
     let expected = from_scratch([5.0, 4.0, 3.0]);
     for v in &mut viewers {
-        v.wait_for(|b| b.info.unwrap().solution_version > before).await;
+        v.wait_for(|b| b.info.unwrap().solution_version > before)
+            .await;
         assert_eq!(mismatch(&v.buffer, &expected), None);
-        assert!(v.deltas.iter().all(|&changed| changed <= 300), "deltas carry only changed patches");
+        assert!(
+            v.deltas.iter().all(|&changed| changed <= 300),
+            "deltas carry only changed patches"
+        );
     }
     assert_eq!(viewers[0].buffer.colours, viewers[1].buffer.colours);
 }
@@ -146,17 +201,83 @@ async fn bad_requests_are_refused_with_a_reason_and_change_nothing() {
     viewer.wait_for(|_| true).await;
     let version = viewer.version();
     let cases = [
-        ("/api/objects/light/emission", None, r#"{"emission": [1, 1, 1]}"#, 401, "missing or wrong bearer token"),
-        ("/api/objects/light/emission", Some("wrong"), r#"{"emission": [1, 1, 1]}"#, 401, "missing or wrong bearer token"),
-        ("/api/objects/lamp/emission", Some(TOKEN), r#"{"emission": [1, 1, 1]}"#, 404, "no object named 'lamp'"),
-        ("/api/objects/light/emission", Some(TOKEN), r#"{"emission": [1, -1, 1]}"#, 400, "emission [1.0, -1.0, 1.0] must have every value finite and >= 0"),
-        ("/api/objects/short_block/transform", None, r#"{"translate": [1, 0, 0]}"#, 401, "missing or wrong bearer token"),
-        ("/api/objects/sofa/transform", Some(TOKEN), r#"{"translate": [1, 0, 0]}"#, 404, "no object named 'sofa'"),
-        ("/api/objects/short_block/transform", Some(TOKEN), r#"{"translate": [1e999, 0, 0]}"#, 400, "body must be JSON like"),
-        ("/api/objects/short_block/transform", Some(TOKEN), r#"{"rotate": [1, 0, 0]}"#, 400, "translate"),
-        ("/api/objects/light/emission", Some(TOKEN), r#"{"emission": [NaN, 1, 1]}"#, 400, "body must be JSON like"),
-        ("/api/objects/light/emission", Some(TOKEN), r#"{"emission": [1, 1]}"#, 400, "body must be JSON like"),
-        ("/api/objects/light/emission", Some(TOKEN), r#"{"emision": [1, 1, 1]}"#, 400, "body must be JSON like"),
+        (
+            "/api/objects/light/emission",
+            None,
+            r#"{"emission": [1, 1, 1]}"#,
+            401,
+            "missing or wrong bearer token",
+        ),
+        (
+            "/api/objects/light/emission",
+            Some("wrong"),
+            r#"{"emission": [1, 1, 1]}"#,
+            401,
+            "missing or wrong bearer token",
+        ),
+        (
+            "/api/objects/lamp/emission",
+            Some(TOKEN),
+            r#"{"emission": [1, 1, 1]}"#,
+            404,
+            "no object named 'lamp'",
+        ),
+        (
+            "/api/objects/light/emission",
+            Some(TOKEN),
+            r#"{"emission": [1, -1, 1]}"#,
+            400,
+            "emission [1.0, -1.0, 1.0] must have every value finite and >= 0",
+        ),
+        (
+            "/api/objects/short_block/transform",
+            None,
+            r#"{"translate": [1, 0, 0]}"#,
+            401,
+            "missing or wrong bearer token",
+        ),
+        (
+            "/api/objects/sofa/transform",
+            Some(TOKEN),
+            r#"{"translate": [1, 0, 0]}"#,
+            404,
+            "no object named 'sofa'",
+        ),
+        (
+            "/api/objects/short_block/transform",
+            Some(TOKEN),
+            r#"{"translate": [1e999, 0, 0]}"#,
+            400,
+            "body must be JSON like",
+        ),
+        (
+            "/api/objects/short_block/transform",
+            Some(TOKEN),
+            r#"{"rotate": [1, 0, 0]}"#,
+            400,
+            "translate",
+        ),
+        (
+            "/api/objects/light/emission",
+            Some(TOKEN),
+            r#"{"emission": [NaN, 1, 1]}"#,
+            400,
+            "body must be JSON like",
+        ),
+        (
+            "/api/objects/light/emission",
+            Some(TOKEN),
+            r#"{"emission": [1, 1]}"#,
+            400,
+            "body must be JSON like",
+        ),
+        (
+            "/api/objects/light/emission",
+            Some(TOKEN),
+            r#"{"emision": [1, 1, 1]}"#,
+            400,
+            "body must be JSON like",
+        ),
     ];
     for (path, token, body, status, reason) in cases {
         let (got, text) = put(address, path, token, body).await;
@@ -175,12 +296,22 @@ async fn rapid_changes_coalesce_and_the_newest_wins() {
     viewer.wait_for(|_| true).await;
     let before = viewer.version();
     for level in 1..=30 {
-        let (status, _) = put(address, "/api/objects/light/emission", Some(TOKEN), &format!(r#"{{"emission": [{level}, {level}, {level}]}}"#)).await;
+        let (status, _) = put(
+            address,
+            "/api/objects/light/emission",
+            Some(TOKEN),
+            &format!(r#"{{"emission": [{level}, {level}, {level}]}}"#),
+        )
+        .await;
         assert_eq!(status, 202);
     }
     let expected = from_scratch([30.0; 3]);
     viewer.wait_for(|b| mismatch(b, &expected).is_none()).await;
-    assert!(viewer.version() - before <= 30, "at most one version per edit: {}", viewer.version() - before);
+    assert!(
+        viewer.version() - before <= 30,
+        "at most one version per edit: {}",
+        viewer.version() - before
+    );
 }
 
 #[test]
@@ -192,7 +323,9 @@ fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation
     let mesh = solver::Mesh::build(&scene, request.patches);
     let mut session = solver::Session::new(&scene, &mesh, &request, &solver::no_progress).unwrap();
     session.solve(&solver::no_progress);
-    session.set_emission("light", Rgb::new(8.0, 6.0, 2.0)).unwrap();
+    session
+        .set_emission("light", Rgb::new(8.0, 6.0, 2.0))
+        .unwrap();
     session.solve(&solver::no_progress);
     let offset = glam::dvec3(40.0, 0.0, -30.0);
     let moved = session.translate("short_block", offset).unwrap();
@@ -200,35 +333,93 @@ fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation
 
     // From scratch: the same scene with the block moved and the light dimmed.
     let mut fresh_scene = scene.clone();
-    let block = fresh_scene.objects.iter().position(|o| o.name == "short_block").unwrap() as u32;
-    let light = fresh_scene.objects.iter().position(|o| o.name == "light").unwrap() as u32;
+    let block = fresh_scene
+        .objects
+        .iter()
+        .position(|o| o.name == "short_block")
+        .unwrap() as u32;
+    let light = fresh_scene
+        .objects
+        .iter()
+        .position(|o| o.name == "light")
+        .unwrap() as u32;
     fresh_scene.translate_object(block, offset);
-    fresh_scene.faces.iter_mut().filter(|f| f.object == light).for_each(|f| f.emission = Rgb::new(8.0, 6.0, 2.0));
+    fresh_scene
+        .faces
+        .iter_mut()
+        .filter(|f| f.object == light)
+        .for_each(|f| f.emission = Rgb::new(8.0, 6.0, 2.0));
     let fresh = solver::solve_scene(fresh_scene, &request, &solver::no_progress).unwrap();
     // The moved mesh is the mesh of the moved scene, to rounding.
-    let drift = session.mesh().patches.iter().zip(&fresh.mesh.patches).map(|(a, b)| a.centroid.distance(b.centroid)).fold(0.0, f64::max);
-    assert!(session.mesh().patches.len() == fresh.mesh.patches.len() && drift < 1e-9 * 560.0, "centroids drift by {drift}");
+    let drift = session
+        .mesh()
+        .patches
+        .iter()
+        .zip(&fresh.mesh.patches)
+        .map(|(a, b)| a.centroid.distance(b.centroid))
+        .fold(0.0, f64::max);
+    assert!(
+        session.mesh().patches.len() == fresh.mesh.patches.len() && drift < 1e-9 * 560.0,
+        "centroids drift by {drift}"
+    );
     let n = fresh.mesh.patches.len();
-    let worst = |expected: &[Rgb]| session.radiosity().iter().zip(expected).map(|(a, b)| (*a - *b).abs().max_element() / b.max_element().max(1e-3)).fold(0.0, f64::max);
+    let worst = |expected: &[Rgb]| {
+        session
+            .radiosity()
+            .iter()
+            .zip(expected)
+            .map(|(a, b)| (*a - *b).abs().max_element() / b.max_element().max(1e-3))
+            .fold(0.0, f64::max)
+    };
     // Against form factors computed afresh on the moved mesh: the update must be exact, so
     // the solutions agree to the solver's tolerance.
     let mut dimmed = session.scene().clone();
-    dimmed.faces.iter_mut().filter(|f| f.object == light).for_each(|f| f.emission = Rgb::new(8.0, 6.0, 2.0));
+    dimmed
+        .faces
+        .iter_mut()
+        .filter(|f| f.object == light)
+        .for_each(|f| f.emission = Rgb::new(8.0, 6.0, 2.0));
     let mut moved_mesh = session.mesh().clone();
-    moved_mesh.patches.iter_mut().filter(|p| p.object == light).for_each(|p| p.emission = Rgb::new(8.0, 6.0, 2.0));
-    let (on_moved_mesh, _) = solver::solve_mesh(&dimmed, &moved_mesh, &request, &solver::no_progress).unwrap();
-    assert!(worst(&on_moved_mesh) < 1e-5, "incremental and fresh form factors disagree: {}", worst(&on_moved_mesh));
+    moved_mesh
+        .patches
+        .iter_mut()
+        .filter(|p| p.object == light)
+        .for_each(|p| p.emission = Rgb::new(8.0, 6.0, 2.0));
+    let (on_moved_mesh, _) =
+        solver::solve_mesh(&dimmed, &moved_mesh, &request, &solver::no_progress).unwrap();
+    assert!(
+        worst(&on_moved_mesh) < 1e-5,
+        "incremental and fresh form factors disagree: {}",
+        worst(&on_moved_mesh)
+    );
     // Against the moved scene meshed anew: its corners differ in the last bits, which can flip
     // a grazing shadow ray.
-    assert!(worst(&fresh.radiosity) < 2e-3, "{}", worst(&fresh.radiosity));
+    assert!(
+        worst(&fresh.radiosity) < 2e-3,
+        "{}",
+        worst(&fresh.radiosity)
+    );
     // Only pairs near the block's path were recomputed, not all n(n-1)/2.
     let all_pairs = n * (n - 1) / 2;
-    println!("moved the short block: {} of {all_pairs} pairs traced, {} of {} entries integrated, in {:.3} s", moved.pairs, moved.entries, n * n, moved.seconds);
+    println!(
+        "moved the short block: {} of {all_pairs} pairs traced, {} of {} entries integrated, in {:.3} s",
+        moved.pairs,
+        moved.entries,
+        n * n,
+        moved.seconds
+    );
     assert!(moved.pairs > 0 && moved.pairs < all_pairs, "{moved:?}");
     assert!(moved.entries < n * n / 2, "{moved:?}");
     // Unknown objects and non-finite offsets are refused.
-    assert_eq!(session.translate("sofa", offset), Err(solver::EditError::UnknownObject("sofa".into())));
-    assert!(session.translate("short_block", glam::dvec3(f64::NAN, 0.0, 0.0)).is_err());
+    assert_eq!(
+        session.translate("sofa", offset),
+        Err(solver::EditError::UnknownObject("sofa".into()))
+    );
+    assert!(
+        session
+            .translate("short_block", glam::dvec3(f64::NAN, 0.0, 0.0))
+            .is_err()
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -237,19 +428,56 @@ async fn moving_an_object_sends_new_geometry_and_colours_of_the_moved_scene() {
     let mut viewer = Viewer::connect(address).await;
     viewer.wait_for(|_| true).await;
     let before_version = viewer.version();
-    let fetch = move || tokio::task::spawn_blocking(move || client::fetch_geometry(&format!("http://{address}")).unwrap());
+    let fetch = move || {
+        tokio::task::spawn_blocking(move || {
+            client::fetch_geometry(&format!("http://{address}")).unwrap()
+        })
+    };
     let before = fetch().await.unwrap();
-    let (status, body) = put(address, "/api/objects/short_block/transform", Some(TOKEN), r#"{"translate": [40, 0, -30]}"#).await;
+    let (status, body) = put(
+        address,
+        "/api/objects/short_block/transform",
+        Some(TOKEN),
+        r#"{"translate": [40, 0, -30]}"#,
+    )
+    .await;
     assert_eq!(status, 202, "{body}");
-    viewer.wait_for(|b| b.info.unwrap().solution_version > before_version).await;
-    assert_eq!(viewer.geometry_versions, [2], "one geometry change, announced before its colours");
+    viewer
+        .wait_for(|b| b.info.unwrap().solution_version > before_version)
+        .await;
+    assert_eq!(
+        viewer.geometry_versions,
+        [2],
+        "one geometry change, announced before its colours"
+    );
     // The served geometry moved the block's corners, and nothing else.
     let after = fetch().await.unwrap();
-    let block = before.objects.iter().position(|o| o == "short_block").unwrap() as u32;
-    let block_corners: std::collections::BTreeSet<u32> = before.patches.iter().zip(&before.patch_objects).filter(|(_, o)| **o == block).flat_map(|(p, _)| p.iter().copied().filter(|c| *c != wire::geometry::NO_CORNER)).collect();
+    let block = before
+        .objects
+        .iter()
+        .position(|o| o == "short_block")
+        .unwrap() as u32;
+    let block_corners: std::collections::BTreeSet<u32> = before
+        .patches
+        .iter()
+        .zip(&before.patch_objects)
+        .filter(|(_, o)| **o == block)
+        .flat_map(|(p, _)| {
+            p.iter()
+                .copied()
+                .filter(|c| *c != wire::geometry::NO_CORNER)
+        })
+        .collect();
     for (i, (a, b)) in before.positions.iter().zip(&after.positions).enumerate() {
-        let expected = if block_corners.contains(&(i as u32)) { [a[0] + 40.0, a[1], a[2] - 30.0] } else { *a };
-        assert!(expected.iter().zip(b).all(|(e, g)| (e - g).abs() < 1e-3), "corner {i}: {b:?} vs {expected:?}");
+        let expected = if block_corners.contains(&(i as u32)) {
+            [a[0] + 40.0, a[1], a[2] - 30.0]
+        } else {
+            *a
+        };
+        assert!(
+            expected.iter().zip(b).all(|(e, g)| (e - g).abs() < 1e-3),
+            "corner {i}: {b:?} vs {expected:?}"
+        );
     }
     // The colours are those of the moved scene.
     let scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
@@ -257,17 +485,33 @@ async fn moving_an_object_sends_new_geometry_and_colours_of_the_moved_scene() {
     let mut moved_scene = scene.clone();
     moved_scene.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
     mesh.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
-    let (expected, _) = solver::solve_mesh(&moved_scene, &mesh, &request(), &solver::no_progress).unwrap();
+    let (expected, _) =
+        solver::solve_mesh(&moved_scene, &mesh, &request(), &solver::no_progress).unwrap();
     let expected: Vec<[f32; 3]> = expected.iter().map(|b| b.as_vec3().to_array()).collect();
     assert_eq!(mismatch(&viewer.buffer, &expected), None);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_hierarchical_server_streams_its_leaves_and_new_leaves_after_a_move() {
-    let hierarchical = || SolveRequest::default().with_method(MethodChoice::Hierarchical, HierarchySettings { error: 0.2, ..HierarchySettings::default() });
+    let hierarchical = || {
+        SolveRequest::default().with_method(
+            MethodChoice::Hierarchical,
+            HierarchySettings {
+                error: 0.2,
+                ..HierarchySettings::default()
+            },
+        )
+    };
     let solve = |scene: solver::Scene| {
         let solved = solver::solve_scene(scene, &hierarchical(), &solver::no_progress).unwrap();
-        (solved.mesh.patches.len(), solved.radiosity.iter().map(|b| b.as_vec3().to_array()).collect::<Vec<[f32; 3]>>())
+        (
+            solved.mesh.patches.len(),
+            solved
+                .radiosity
+                .iter()
+                .map(|b| b.as_vec3().to_array())
+                .collect::<Vec<[f32; 3]>>(),
+        )
     };
     let (address, _, _edit_loop) = live("scenes/cornell-box.obj", hierarchical()).await;
     let mut viewer = Viewer::connect(address).await;
@@ -278,15 +522,34 @@ async fn a_hierarchical_server_streams_its_leaves_and_new_leaves_after_a_move() 
     assert_eq!(mismatch(&viewer.buffer, &expected), None);
     // A move rebuilds the hierarchy: new leaves, announced as a new geometry, then their colours.
     let before_version = viewer.version();
-    let (status, body) = put(address, "/api/objects/short_block/transform", Some(TOKEN), r#"{"translate": [40, 0, -30]}"#).await;
+    let (status, body) = put(
+        address,
+        "/api/objects/short_block/transform",
+        Some(TOKEN),
+        r#"{"translate": [40, 0, -30]}"#,
+    )
+    .await;
     assert_eq!(status, 202, "{body}");
-    viewer.wait_for(|b| b.info.unwrap().solution_version > before_version).await;
+    viewer
+        .wait_for(|b| b.info.unwrap().solution_version > before_version)
+        .await;
     assert_eq!(viewer.geometry_versions, [2]);
     let mut moved = scene.clone();
-    let block = scene.objects.iter().position(|o| o.name == "short_block").unwrap() as u32;
+    let block = scene
+        .objects
+        .iter()
+        .position(|o| o.name == "short_block")
+        .unwrap() as u32;
     moved.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
     let (leaves, expected) = solve(moved);
-    let geometry = tokio::task::spawn_blocking(move || client::fetch_geometry(&format!("http://{address}")).unwrap()).await.unwrap();
-    assert_eq!((geometry.patches.len(), viewer.buffer.colours.len()), (leaves, leaves));
+    let geometry = tokio::task::spawn_blocking(move || {
+        client::fetch_geometry(&format!("http://{address}")).unwrap()
+    })
+    .await
+    .unwrap();
+    assert_eq!(
+        (geometry.patches.len(), viewer.buffer.colours.len()),
+        (leaves, leaves)
+    );
     assert_eq!(mismatch(&viewer.buffer, &expected), None);
 }

@@ -14,7 +14,13 @@ fn closed_forms_reproduce_the_published_values() {
 }
 
 /// From one patch per plate (every pair in the near field) to a fine mesh.
-const MESHES: [PatchTarget; 5] = [PatchTarget::Count(2), PatchTarget::Count(8), PatchTarget::Count(50), PatchTarget::Count(200), PatchTarget::Count(1000)];
+const MESHES: [PatchTarget; 5] = [
+    PatchTarget::Count(2),
+    PatchTarget::Count(8),
+    PatchTarget::Count(50),
+    PatchTarget::Count(200),
+    PatchTarget::Count(1000),
+];
 
 #[test]
 fn parallel_rectangles_match_howell_c11() {
@@ -24,7 +30,10 @@ fn parallel_rectangles_match_howell_c11() {
             let (mesh, factors) = form_factors(&scene, target);
             let f = object_form_factor(&mesh, &factors, 0, 1);
             let expected = howell_parallel(a, b, c);
-            assert!((f - expected).abs() < 1e-3, "{a}x{b} at {c}, {target:?}: {f} vs {expected}");
+            assert!(
+                (f - expected).abs() < 1e-3,
+                "{a}x{b} at {c}, {target:?}: {f} vs {expected}"
+            );
         }
     }
 }
@@ -37,7 +46,10 @@ fn perpendicular_rectangles_sharing_an_edge_match_howell_c14() {
             let (mesh, factors) = form_factors(&scene, target);
             let f = object_form_factor(&mesh, &factors, 0, 1);
             let expected = howell_perpendicular(w, h, l);
-            assert!((f - expected).abs() < 1e-3, "w={w} h={h} l={l}, {target:?}: {f} vs {expected}");
+            assert!(
+                (f - expected).abs() < 1e-3,
+                "w={w} h={h} l={l}, {target:?}: {f} vs {expected}"
+            );
         }
     }
 }
@@ -47,12 +59,24 @@ fn reciprocity_holds_between_the_faces_of_a_box() {
     let scene = closed_cube(1.0, grey(0.5, 0.0));
     for target in [PatchTarget::Count(6), PatchTarget::Count(600)] {
         let (mesh, factors) = form_factors(&scene, target);
-        let area = |object: u32| mesh.patches.iter().filter(|p| p.object == object).map(|p| p.area).sum::<f64>();
+        let area = |object: u32| {
+            mesh.patches
+                .iter()
+                .filter(|p| p.object == object)
+                .map(|p| p.area)
+                .sum::<f64>()
+        };
         for a in 0..6 {
             for b in 0..6 {
-                let (ab, ba) = (area(a) * object_form_factor(&mesh, &factors, a, b), area(b) * object_form_factor(&mesh, &factors, b, a));
+                let (ab, ba) = (
+                    area(a) * object_form_factor(&mesh, &factors, a, b),
+                    area(b) * object_form_factor(&mesh, &factors, b, a),
+                );
                 // A_a F_ab = A_b F_ba; each direction has its own receiver quadrature.
-                assert!((ab - ba).abs() <= 1e-3 * ab.max(ba) + 1e-12, "{target:?}, faces {a}, {b}: {ab} vs {ba}");
+                assert!(
+                    (ab - ba).abs() <= 1e-3 * ab.max(ba) + 1e-12,
+                    "{target:?}, faces {a}, {b}: {ab} vs {ba}"
+                );
             }
         }
     }

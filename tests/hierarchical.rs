@@ -5,13 +5,22 @@ mod common;
 
 use common::*;
 use glam::{DVec3, dvec3};
-use solver::{HierarchySettings, Method, Scene, SolveError, SolveRequest, SolverSettings, Solved, solve_scene};
+use solver::{
+    HierarchySettings, Method, Scene, SolveError, SolveRequest, Solved, SolverSettings, solve_scene,
+};
 use std::path::Path;
 
 fn hierarchical(error: f64) -> SolveRequest {
     SolveRequest {
-        hierarchy: Some(HierarchySettings { error, ..HierarchySettings::default() }),
-        solver: SolverSettings { method: Method::Gmres, tolerance: 1e-9, ..SolverSettings::default() },
+        hierarchy: Some(HierarchySettings {
+            error,
+            ..HierarchySettings::default()
+        }),
+        solver: SolverSettings {
+            method: Method::Gmres,
+            tolerance: 1e-9,
+            ..SolverSettings::default()
+        },
         ..SolveRequest::default()
     }
 }
@@ -25,28 +34,60 @@ fn furnaces_stay_exact_with_and_without_an_occluder() {
     for rho in [0.5, 0.9, 0.99] {
         let solved = solve(closed_cube(1.0, grey(rho, 1.0)), 0.1);
         let expected = 1.0 / (1.0 - rho);
-        let worst = solved.radiosity.iter().map(|b| (b.x / expected - 1.0).abs()).fold(0.0, f64::max);
-        println!("hierarchical furnace, rho {rho}: {} leaves, worst relative error {worst:.2e}", solved.radiosity.len());
+        let worst = solved
+            .radiosity
+            .iter()
+            .map(|b| (b.x / expected - 1.0).abs())
+            .fold(0.0, f64::max);
+        println!(
+            "hierarchical furnace, rho {rho}: {} leaves, worst relative error {worst:.2e}",
+            solved.radiosity.len()
+        );
         assert!(worst < 1e-3, "rho {rho}: {worst}");
     }
     let (rho, emission) = (0.8, 1.0);
     let scene = occluded_furnace(grey(rho, emission));
     let solved = solve(scene, 0.1);
-    let worst = solved.radiosity.iter().map(|b| (b.x * (1.0 - rho) / emission - 1.0).abs()).fold(0.0, f64::max);
-    println!("hierarchical occluded furnace: {} leaves, worst relative error {worst:.2e}", solved.radiosity.len());
+    let worst = solved
+        .radiosity
+        .iter()
+        .map(|b| (b.x * (1.0 - rho) / emission - 1.0).abs())
+        .fold(0.0, f64::max);
+    println!(
+        "hierarchical occluded furnace: {} leaves, worst relative error {worst:.2e}",
+        solved.radiosity.len()
+    );
     assert!(worst < 1e-3, "{worst}");
 }
 
 #[test]
 fn plates_and_hinge_give_rho_f_e() {
     let (rho, emission) = (0.6, 10.0);
-    let plates = solve(parallel_plates(1.0, 1.0, 1.0, grey(rho, 0.0), grey(0.0, emission)), 0.03);
-    let (got, expected) = (mean_of(&plates, "receiver").x, rho * howell_parallel(1.0, 1.0, 1.0) * emission);
-    println!("hierarchical plates: {got:.6} vs {expected:.6} ({:+.3}%)", 100.0 * (got / expected - 1.0));
+    let plates = solve(
+        parallel_plates(1.0, 1.0, 1.0, grey(rho, 0.0), grey(0.0, emission)),
+        0.03,
+    );
+    let (got, expected) = (
+        mean_of(&plates, "receiver").x,
+        rho * howell_parallel(1.0, 1.0, 1.0) * emission,
+    );
+    println!(
+        "hierarchical plates: {got:.6} vs {expected:.6} ({:+.3}%)",
+        100.0 * (got / expected - 1.0)
+    );
     assert!((got / expected - 1.0).abs() < 0.01, "{got} vs {expected}");
-    let hinge = solve(hinge(1.0, 1.0, 1.0, grey(rho, 0.0), grey(0.0, emission)), 0.03);
-    let (got, expected) = (mean_of(&hinge, "floor").x, rho * howell_perpendicular(1.0, 1.0, 1.0) * emission);
-    println!("hierarchical hinge: {got:.6} vs {expected:.6} ({:+.3}%)", 100.0 * (got / expected - 1.0));
+    let hinge = solve(
+        hinge(1.0, 1.0, 1.0, grey(rho, 0.0), grey(0.0, emission)),
+        0.03,
+    );
+    let (got, expected) = (
+        mean_of(&hinge, "floor").x,
+        rho * howell_perpendicular(1.0, 1.0, 1.0) * emission,
+    );
+    println!(
+        "hierarchical hinge: {got:.6} vs {expected:.6} ({:+.3}%)",
+        100.0 * (got / expected - 1.0)
+    );
     assert!((got / expected - 1.0).abs() < 0.01, "{got} vs {expected}");
 }
 
@@ -54,10 +95,19 @@ fn plates_and_hinge_give_rho_f_e() {
 fn no_light_leaks_through_a_closed_wall() {
     let solved = solve(two_rooms_one_lamp(), 0.05);
     let room_b = brightness_of(&solved, "b");
-    let (brightest, lit) = (room_b.iter().cloned().fold(0.0, f64::max), mean_of(&solved, "a").x);
-    println!("room b: {} leaves, brightest {brightest:e}; room a mean {lit}", room_b.len());
+    let (brightest, lit) = (
+        room_b.iter().cloned().fold(0.0, f64::max),
+        mean_of(&solved, "a").x,
+    );
+    println!(
+        "room b: {} leaves, brightest {brightest:e}; room a mean {lit}",
+        room_b.len()
+    );
     // Round-off of the Krylov solve, not transport: no link carries light across the wall.
-    assert!(!room_b.is_empty() && brightest < 1e-12 * lit, "light leaked into room b: {brightest:e}");
+    assert!(
+        !room_b.is_empty() && brightest < 1e-12 * lit,
+        "light leaked into room b: {brightest:e}"
+    );
     assert!(lit > 0.1);
 }
 
@@ -66,35 +116,104 @@ fn leaves_gather_at_the_shadow_boundary_not_where_light_is_flat() {
     // A small lamp 20 above a 4 x 4 floor lights it almost evenly (within 2%); a 1 x 1 slab 0.5
     // above the floor casts a sharp shadow whose edge lies at |x| = 0.5 * 20 / 19.5.
     let mut scene = Scene::default();
-    add_rect(&mut scene, "floor", dvec3(-2.0, 0.0, -2.0), DVec3::Z * 4.0, DVec3::X * 4.0, grey(0.5, 0.0));
-    add_rect(&mut scene, "lamp", dvec3(-0.25, 20.0, -0.25), DVec3::X * 0.5, DVec3::Z * 0.5, grey(0.0, 1e4));
-    add_rect(&mut scene, "slab", dvec3(-0.5, 0.5, -0.5), DVec3::X, DVec3::Z, grey(0.5, 0.0));
-    add_rect(&mut scene, "slab", dvec3(-0.5, 0.5, -0.5), DVec3::Z, DVec3::X, grey(0.5, 0.0));
+    add_rect(
+        &mut scene,
+        "floor",
+        dvec3(-2.0, 0.0, -2.0),
+        DVec3::Z * 4.0,
+        DVec3::X * 4.0,
+        grey(0.5, 0.0),
+    );
+    add_rect(
+        &mut scene,
+        "lamp",
+        dvec3(-0.25, 20.0, -0.25),
+        DVec3::X * 0.5,
+        DVec3::Z * 0.5,
+        grey(0.0, 1e4),
+    );
+    add_rect(
+        &mut scene,
+        "slab",
+        dvec3(-0.5, 0.5, -0.5),
+        DVec3::X,
+        DVec3::Z,
+        grey(0.5, 0.0),
+    );
+    add_rect(
+        &mut scene,
+        "slab",
+        dvec3(-0.5, 0.5, -0.5),
+        DVec3::Z,
+        DVec3::X,
+        grey(0.5, 0.0),
+    );
     let solved = solve(scene, 0.05);
     let edge = 0.5 * 20.0 / 19.5;
-    let count = |x: std::ops::Range<f64>| solved.mesh.patches.iter().filter(|p| p.object == 0 && x.contains(&p.centroid.x.abs()) && p.centroid.z.abs() < 0.3).count();
+    let count = |x: std::ops::Range<f64>| {
+        solved
+            .mesh
+            .patches
+            .iter()
+            .filter(|p| {
+                p.object == 0 && x.contains(&p.centroid.x.abs()) && p.centroid.z.abs() < 0.3
+            })
+            .count()
+    };
     let (boundary, flat) = (count(edge - 0.125..edge + 0.125), count(1.3..1.55));
-    println!("leaves in two 0.25 x 0.6 strips: {boundary} across the shadow edge, {flat} where light is flat ({} in all)", solved.radiosity.len());
-    assert!(boundary >= 8 * flat.max(1), "shadow edge {boundary} vs flat {flat}");
+    println!(
+        "leaves in two 0.25 x 0.6 strips: {boundary} across the shadow edge, {flat} where light is flat ({} in all)",
+        solved.radiosity.len()
+    );
+    assert!(
+        boundary >= 8 * flat.max(1),
+        "shadow edge {boundary} vs flat {flat}"
+    );
 }
 
 #[test]
 fn hierarchical_and_dense_agree_on_the_cornell_box() {
     let scene = Scene::load_obj(Path::new("scenes/cornell-box.obj")).expect("loads");
     let error = 0.05;
-    let dense = solve_scene(scene.clone(), &SolveRequest { patches: solver::PatchTarget::Count(2500), ..SolveRequest::default() }, &solver::no_progress).expect("solves");
+    let dense = solve_scene(
+        scene.clone(),
+        &SolveRequest {
+            patches: solver::PatchTarget::Count(2500),
+            ..SolveRequest::default()
+        },
+        &solver::no_progress,
+    )
+    .expect("solves");
     let hierarchical = solve(scene, error);
     let (mut weighted, mut area) = (0.0, 0.0);
-    for (d, h) in dense.report.objects.iter().zip(&hierarchical.report.objects).filter(|(d, _)| d.name != "light") {
-        let difference = d.radiosity.iter().zip(h.radiosity).map(|(a, b)| (b / a - 1.0).abs()).fold(0.0, f64::max);
-        println!("{}: hierarchical and dense means differ by {difference:.4}", d.name);
+    for (d, h) in dense
+        .report
+        .objects
+        .iter()
+        .zip(&hierarchical.report.objects)
+        .filter(|(d, _)| d.name != "light")
+    {
+        let difference = d
+            .radiosity
+            .iter()
+            .zip(h.radiosity)
+            .map(|(a, b)| (b / a - 1.0).abs())
+            .fold(0.0, f64::max);
+        println!(
+            "{}: hierarchical and dense means differ by {difference:.4}",
+            d.name
+        );
         weighted += difference * d.area;
         area += d.area;
         assert!(difference < error, "{}: {difference}", d.name);
     }
     // Links read each source's linear model where they see it, so their errors do not all
     // lean one way and the mean difference stays well inside the knob (docs/ACCURACY.md).
-    println!("area-weighted mean difference {:.4} ({} leaves vs 2500 patches)", weighted / area, hierarchical.radiosity.len());
+    println!(
+        "area-weighted mean difference {:.4} ({} leaves vs 2500 patches)",
+        weighted / area,
+        hierarchical.radiosity.len()
+    );
     assert!(weighted / area < error / 2.0, "{}", weighted / area);
 }
 
@@ -102,7 +221,13 @@ fn hierarchical_and_dense_agree_on_the_cornell_box() {
 fn a_method_that_needs_single_rows_is_refused_with_the_reason() {
     let mut request = hierarchical(0.1);
     request.solver.method = Method::GaussSeidel;
-    let Err(error) = solve_scene(closed_cube(1.0, grey(0.5, 1.0)), &request, &solver::no_progress) else { panic!("gauss-seidel cannot run on links") };
+    let Err(error) = solve_scene(
+        closed_cube(1.0, grey(0.5, 1.0)),
+        &request,
+        &solver::no_progress,
+    ) else {
+        panic!("gauss-seidel cannot run on links")
+    };
     assert!(matches!(error, SolveError::Method(_)));
     assert_eq!(
         error.to_string(),

@@ -5,10 +5,19 @@ mod common;
 use common::*;
 use solver::{Method, PatchTarget, Rgb, SolveRequest, SolverSettings, solve_scene};
 
-fn solve_with(scene: solver::Scene, patches: usize, method: Method, tolerance: f64) -> solver::Solved {
+fn solve_with(
+    scene: solver::Scene,
+    patches: usize,
+    method: Method,
+    tolerance: f64,
+) -> solver::Solved {
     let request = SolveRequest {
         patches: PatchTarget::Count(patches),
-        solver: SolverSettings { method, tolerance, ..SolverSettings::default() },
+        solver: SolverSettings {
+            method,
+            tolerance,
+            ..SolverSettings::default()
+        },
         ..SolveRequest::default()
     };
     solve_scene(scene, &request, &solver::no_progress).expect("scene solves")
@@ -34,10 +43,18 @@ fn bright_enclosures_converge_in_few_gmres_iterations() {
     for rho in [0.99, 0.999] {
         let solved = solve_with(closed_cube(1.0, grey(rho, 1.0)), 150, Method::Gmres, 1e-7);
         let expected = 1.0 / (1.0 - rho);
-        let worst = solved.radiosity.iter().map(|b| (b.x - expected).abs() / expected).fold(0.0, f64::max);
+        let worst = solved
+            .radiosity
+            .iter()
+            .map(|b| (b.x - expected).abs() / expected)
+            .fold(0.0, f64::max);
         assert!(worst < 1e-3, "rho {rho}: worst relative error {worst}");
         // Jacobi would need ln(1e-7) / ln(rho) sweeps: 1,604 at 0.99 and 16,110 at 0.999.
-        assert!(solved.report.iterations <= 60, "rho {rho}: {} iterations", solved.report.iterations);
+        assert!(
+            solved.report.iterations <= 60,
+            "rho {rho}: {} iterations",
+            solved.report.iterations
+        );
     }
 }
 
@@ -46,10 +63,18 @@ fn receiver_mean_is_reflectance_times_form_factor_times_emission() {
     let (rho, emission) = (0.6, 10.0);
     let expected = rho * howell_parallel(1.0, 1.0, 1.0) * emission;
     for patches in [2, 1000] {
-        let solved = solve_with(parallel_plates(1.0, 1.0, 1.0, grey(rho, 0.0), grey(0.0, emission)), patches, Method::Gmres, 1e-9);
+        let solved = solve_with(
+            parallel_plates(1.0, 1.0, 1.0, grey(rho, 0.0), grey(0.0, emission)),
+            patches,
+            Method::Gmres,
+            1e-9,
+        );
         let receiver = &solved.report.objects[0];
         for channel in receiver.radiosity {
-            assert!((channel - expected).abs() < 1e-3 * emission * rho, "{patches} patches: {channel} vs {expected}");
+            assert!(
+                (channel - expected).abs() < 1e-3 * emission * rho,
+                "{patches} patches: {channel} vs {expected}"
+            );
         }
         // The emitter is black: it keeps its own emission, up to the solver tolerance.
         for channel in solved.report.objects[1].radiosity {
@@ -60,17 +85,33 @@ fn receiver_mean_is_reflectance_times_form_factor_times_emission() {
 
 #[test]
 fn all_methods_agree_on_the_cornell_box() {
-    let scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
+    let scene =
+        solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
     let tolerance = 1e-8;
-    let answers: Vec<_> = Method::ALL.iter().map(|&m| solve_with(scene.clone(), 300, m, tolerance)).collect();
+    let answers: Vec<_> = Method::ALL
+        .iter()
+        .map(|&m| solve_with(scene.clone(), 300, m, tolerance))
+        .collect();
     let reference = &answers[3].radiosity;
     // |B - B*| <= |r| / (1 - rho_max); rho_max is 0.78 here.
     let bound = 2.0 * tolerance / (1.0 - 0.78);
     for solved in &answers {
         assert!(solved.report.converged, "{}", solved.report.method);
-        let diff = solved.radiosity.iter().zip(reference).map(|(a, b)| (*a - *b).abs().max_element()).fold(0.0, f64::max);
-        let scale = reference.iter().map(|b| b.max_element()).fold(0.0, f64::max);
-        assert!(diff <= bound * scale, "{} differs by {diff}", solved.report.method);
+        let diff = solved
+            .radiosity
+            .iter()
+            .zip(reference)
+            .map(|(a, b)| (*a - *b).abs().max_element())
+            .fold(0.0, f64::max);
+        let scale = reference
+            .iter()
+            .map(|b| b.max_element())
+            .fold(0.0, f64::max);
+        assert!(
+            diff <= bound * scale,
+            "{} differs by {diff}",
+            solved.report.method
+        );
     }
 }
 
@@ -85,12 +126,16 @@ fn a_scene_without_emitters_solves_to_zeros() {
 
 #[test]
 fn scaling_the_scene_leaves_radiosity_unchanged() {
-    let scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
+    let scene =
+        solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
     let base = solve_with(scene.clone(), 300, Method::Gmres, 1e-8);
     for factor in [1e-3, 1e3] {
         let scaled = solve_with(scene.scaled(factor), 300, Method::Gmres, 1e-8);
         for (a, b) in base.radiosity.iter().zip(&scaled.radiosity) {
-            assert!((*a - *b).abs().max_element() <= 1e-4 * a.max_element().max(1e-3), "scale {factor}: {a} vs {b}");
+            assert!(
+                (*a - *b).abs().max_element() <= 1e-4 * a.max_element().max(1e-3),
+                "scale {factor}: {a} vs {b}"
+            );
         }
     }
 }

@@ -12,7 +12,14 @@ use std::f64::consts::PI;
 
 fn trace(scene: &solver::Scene, probes: usize, samples: u32, seed: u64) -> Vec<Probe> {
     let occluders = Occluders::new(scene);
-    trace_probes(scene, &occluders, &place_probes(scene, probes, seed), samples, seed, &solver::no_progress)
+    trace_probes(
+        scene,
+        &occluders,
+        &place_probes(scene, probes, seed),
+        samples,
+        seed,
+        &solver::no_progress,
+    )
 }
 
 #[test]
@@ -30,7 +37,9 @@ fn the_tracer_reproduces_the_furnace() {
 /// Howell B-3: from a point to a parallel `a x b` rectangle whose corner is straight above it.
 fn point_to_corner_rectangle(a: f64, b: f64, height: f64) -> f64 {
     let (x, y) = (a / height, b / height);
-    (x / (1.0 + x * x).sqrt() * (y / (1.0 + x * x).sqrt()).atan() + y / (1.0 + y * y).sqrt() * (x / (1.0 + y * y).sqrt()).atan()) / (2.0 * PI)
+    (x / (1.0 + x * x).sqrt() * (y / (1.0 + x * x).sqrt()).atan()
+        + y / (1.0 + y * y).sqrt() * (x / (1.0 + y * y).sqrt()).atan())
+        / (2.0 * PI)
 }
 
 #[test]
@@ -41,16 +50,27 @@ fn the_tracer_matches_the_analytic_point_form_factor() {
     for probe in trace(&scene, 40, 4000, 5).iter().filter(|p| p.face == 0) {
         let [x, y, _] = probe.position;
         // Split the emitter at the point's projection into four corner rectangles.
-        let f: f64 = [(x, y), (1.0 - x, y), (x, 1.0 - y), (1.0 - x, 1.0 - y)].iter().map(|&(a, b)| point_to_corner_rectangle(a, b, 1.0)).sum();
+        let f: f64 = [(x, y), (1.0 - x, y), (x, 1.0 - y), (1.0 - x, 1.0 - y)]
+            .iter()
+            .map(|&(a, b)| point_to_corner_rectangle(a, b, 1.0))
+            .sum();
         let expected = rho * f * emission;
-        assert!((probe.radiosity[0] - expected).abs() <= 5.0 * probe.standard_error[0] + 1e-9, "at ({x}, {y}): {} vs {expected}", probe.radiosity[0]);
+        assert!(
+            (probe.radiosity[0] - expected).abs() <= 5.0 * probe.standard_error[0] + 1e-9,
+            "at ({x}, {y}): {} vs {expected}",
+            probe.radiosity[0]
+        );
     }
 }
 
 #[test]
 fn the_same_seed_gives_the_same_reference_on_any_thread_count() {
     let scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
-    let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| trace(&scene, 16, 64, 9));
+    let single = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(|| trace(&scene, 16, 64, 9));
     let many = trace(&scene, 16, 64, 9);
     assert_eq!(single, many);
     assert_ne!(trace(&scene, 16, 64, 10), many);
@@ -60,30 +80,68 @@ fn the_same_seed_gives_the_same_reference_on_any_thread_count() {
 fn probes_spread_by_area() {
     // A 3 x 1 plate beside a 1 x 1 plate: three quarters of the probes on the big one.
     let mut scene = solver::Scene::default();
-    add_rect(&mut scene, "big", dvec3(0.0, 0.0, 0.0), dvec3(3.0, 0.0, 0.0), dvec3(0.0, 1.0, 0.0), grey(0.5, 0.0));
-    add_rect(&mut scene, "small", dvec3(5.0, 0.0, 0.0), dvec3(1.0, 0.0, 0.0), dvec3(0.0, 1.0, 0.0), grey(0.5, 0.0));
+    add_rect(
+        &mut scene,
+        "big",
+        dvec3(0.0, 0.0, 0.0),
+        dvec3(3.0, 0.0, 0.0),
+        dvec3(0.0, 1.0, 0.0),
+        grey(0.5, 0.0),
+    );
+    add_rect(
+        &mut scene,
+        "small",
+        dvec3(5.0, 0.0, 0.0),
+        dvec3(1.0, 0.0, 0.0),
+        dvec3(0.0, 1.0, 0.0),
+        grey(0.5, 0.0),
+    );
     let probes = place_probes(&scene, 4000, 1);
     let on_big = probes.iter().filter(|(face, _)| *face == 0).count() as f64 / 4000.0;
     assert!((on_big - 0.75).abs() < 0.03, "{on_big}");
-    assert!(probes.iter().all(|(face, p)| if *face == 0 { p.x <= 3.0 } else { p.x >= 5.0 }));
+    assert!(
+        probes
+            .iter()
+            .all(|(face, p)| if *face == 0 { p.x <= 3.0 } else { p.x >= 5.0 })
+    );
 }
 
 #[test]
 fn a_solve_with_exact_probes_has_no_error_and_a_wrong_one_does() {
     let scene = closed_cube(1.0, grey(0.5, 1.0));
-    let request = SolveRequest { patches: PatchTarget::Count(150), solver: SolverSettings { method: Method::Gmres, tolerance: 1e-9, ..Default::default() }, ..Default::default() };
+    let request = SolveRequest {
+        patches: PatchTarget::Count(150),
+        solver: SolverSettings {
+            method: Method::Gmres,
+            tolerance: 1e-9,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
     let solved = solve_scene(scene.clone(), &request, &solver::no_progress).unwrap();
     // Exact probes: 2 everywhere. Emitting faces do not count, so make the floor dark.
     let mut dark_floor = scene.clone();
     dark_floor.faces[0].emission = Rgb::ZERO;
     let exact: Vec<Probe> = place_probes(&dark_floor, 50, 2)
         .into_iter()
-        .map(|(face, p)| Probe { position: p.to_array(), face, object: String::new(), radiosity: [2.0; 3], standard_error: [0.0; 3] })
+        .map(|(face, p)| Probe {
+            position: p.to_array(),
+            face,
+            object: String::new(),
+            radiosity: [2.0; 3],
+            standard_error: [0.0; 3],
+        })
         .collect();
     let error = evaluate(&dark_floor, &solved.mesh, &solved.radiosity, &exact);
     assert!(error.probes > 0 && error.probes < 50);
-    assert!(error.smooth.rms < 1e-6 && error.flat.rms < 1e-6 && error.smooth.energy.abs() < 1e-6, "{error:?}");
+    assert!(
+        error.smooth.rms < 1e-6 && error.flat.rms < 1e-6 && error.smooth.energy.abs() < 1e-6,
+        "{error:?}"
+    );
     let halved: Vec<Rgb> = solved.radiosity.iter().map(|b| *b * 0.5).collect();
     let error = evaluate(&dark_floor, &solved.mesh, &halved, &exact);
-    assert!((error.flat.rms - 0.5).abs() < 1e-6 && (error.smooth.energy + 0.5).abs() < 1e-6, "{error:?}");
+    assert!(
+        (error.flat.rms - 0.5).abs() < 1e-6 && (error.smooth.energy + 0.5).abs() < 1e-6,
+        "{error:?}"
+    );
 }

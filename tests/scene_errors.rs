@@ -24,7 +24,9 @@ fn error_of(obj: &str, mtl: Option<&str>) -> (String, PathBuf) {
 
 #[test]
 fn a_good_scene_loads_with_names_and_materials() {
-    let obj = format!("mtllib scene.mtl\no plate\nusemtl white\n{SQUARE}f 1 2 3 4\no lamp\nusemtl lamp\n{SQUARE}f -1 -2 -3\n");
+    let obj = format!(
+        "mtllib scene.mtl\no plate\nusemtl white\n{SQUARE}f 1 2 3 4\no lamp\nusemtl lamp\n{SQUARE}f -1 -2 -3\n"
+    );
     let (scene, _, _folder) = load(&obj, Some(MTL));
     let scene = scene.expect("loads");
     let names: Vec<_> = scene.objects.iter().map(|o| o.name.as_str()).collect();
@@ -36,58 +38,124 @@ fn a_good_scene_loads_with_names_and_materials() {
 
 #[test]
 fn a_missing_file_is_named() {
-    let error = Scene::load_obj(Path::new("no/such/scene.obj")).expect_err("missing").to_string();
-    assert!(error.starts_with("no/such/scene.obj: cannot read"), "{error}");
+    let error = Scene::load_obj(Path::new("no/such/scene.obj"))
+        .expect_err("missing")
+        .to_string();
+    assert!(
+        error.starts_with("no/such/scene.obj: cannot read"),
+        "{error}"
+    );
 }
 
 #[test]
 fn a_missing_material_library_is_named() {
-    let (error, path) = error_of(&format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 3\n"), None);
+    let (error, path) = error_of(
+        &format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 3\n"),
+        None,
+    );
     let mtl = path.with_extension("mtl");
-    assert!(error.starts_with(&format!("{}: cannot read", mtl.display())), "{error}");
+    assert!(
+        error.starts_with(&format!("{}: cannot read", mtl.display())),
+        "{error}"
+    );
 }
 
 #[test]
 fn an_unknown_material_names_its_line() {
-    let (error, path) = error_of(&format!("mtllib scene.mtl\no a\nusemtl marble\n{SQUARE}f 1 2 3\n"), Some(MTL));
-    assert_eq!(error, format!("{}:3: material 'marble' is not defined in any mtllib", path.display()));
+    let (error, path) = error_of(
+        &format!("mtllib scene.mtl\no a\nusemtl marble\n{SQUARE}f 1 2 3\n"),
+        Some(MTL),
+    );
+    assert_eq!(
+        error,
+        format!(
+            "{}:3: material 'marble' is not defined in any mtllib",
+            path.display()
+        )
+    );
 }
 
 #[test]
 fn faces_without_a_material_are_refused() {
     let (error, path) = error_of(&format!("o bare\n{SQUARE}f 1 2 3\n"), None);
-    assert_eq!(error, format!("{}: object 'bare' has faces but no material (add `usemtl NAME`)", path.display()));
+    assert_eq!(
+        error,
+        format!(
+            "{}: object 'bare' has faces but no material (add `usemtl NAME`)",
+            path.display()
+        )
+    );
 }
 
 #[test]
 fn an_index_out_of_range_names_its_line() {
-    let (error, path) = error_of(&format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 9\n"), Some(MTL));
-    assert_eq!(error, format!("{}:8: face refers to vertex 9, but only 4 vertices are defined before it", path.display()));
+    let (error, path) = error_of(
+        &format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 9\n"),
+        Some(MTL),
+    );
+    assert_eq!(
+        error,
+        format!(
+            "{}:8: face refers to vertex 9, but only 4 vertices are defined before it",
+            path.display()
+        )
+    );
 }
 
 #[test]
 fn non_finite_coordinates_name_their_line() {
     for bad in ["nan", "inf", "-inf", "1e999", "abc"] {
-        let (error, path) = error_of(&format!("mtllib scene.mtl\no a\nusemtl white\nv 0 0 0\nv 1 {bad} 0\nv 0 1 0\nf 1 2 3\n"), Some(MTL));
-        assert_eq!(error, format!("{}:5: vertex 2 has coordinate '{bad}', which is not a finite number", path.display()));
+        let (error, path) = error_of(
+            &format!(
+                "mtllib scene.mtl\no a\nusemtl white\nv 0 0 0\nv 1 {bad} 0\nv 0 1 0\nf 1 2 3\n"
+            ),
+            Some(MTL),
+        );
+        assert_eq!(
+            error,
+            format!(
+                "{}:5: vertex 2 has coordinate '{bad}', which is not a finite number",
+                path.display()
+            )
+        );
     }
 }
 
 #[test]
 fn reflectance_outside_zero_to_one_and_negative_emission_are_refused() {
     for (material, reason) in [
-        ("Kd 1 0.5 0.5", "Kd [1.0, 0.5, 0.5] must have every channel in [0, 1)"),
-        ("Kd -0.1 0.5 0.5", "Kd [-0.10000000149011612, 0.5, 0.5] must have every channel in [0, 1)"),
-        ("Kd 0.5 0.5 0.5\nKe 1 -2 1", "Ke [1.0, -2.0, 1.0] must have every channel finite and >= 0"),
+        (
+            "Kd 1 0.5 0.5",
+            "Kd [1.0, 0.5, 0.5] must have every channel in [0, 1)",
+        ),
+        (
+            "Kd -0.1 0.5 0.5",
+            "Kd [-0.10000000149011612, 0.5, 0.5] must have every channel in [0, 1)",
+        ),
+        (
+            "Kd 0.5 0.5 0.5\nKe 1 -2 1",
+            "Ke [1.0, -2.0, 1.0] must have every channel finite and >= 0",
+        ),
     ] {
-        let (error, path) = error_of(&format!("mtllib scene.mtl\no a\nusemtl m\n{SQUARE}f 1 2 3\n"), Some(&format!("newmtl m\n{material}\n")));
-        assert_eq!(error, format!("{}: material 'm': {reason}", path.with_extension("mtl").display()));
+        let (error, path) = error_of(
+            &format!("mtllib scene.mtl\no a\nusemtl m\n{SQUARE}f 1 2 3\n"),
+            Some(&format!("newmtl m\n{material}\n")),
+        );
+        assert_eq!(
+            error,
+            format!(
+                "{}: material 'm': {reason}",
+                path.with_extension("mtl").display()
+            )
+        );
     }
 }
 
 #[test]
 fn zero_area_faces_are_skipped_and_counted() {
-    let obj = format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 3 4\nf 1 2 1\nv 2 0 0\nf 1 2 5\n");
+    let obj = format!(
+        "mtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 3 4\nf 1 2 1\nv 2 0 0\nf 1 2 5\n"
+    );
     let (scene, _, _folder) = load(&obj, Some(MTL));
     let scene = scene.expect("loads");
     assert_eq!(scene.faces.len(), 1);
@@ -96,16 +164,38 @@ fn zero_area_faces_are_skipped_and_counted() {
 
 #[test]
 fn a_scene_of_only_degenerate_faces_is_empty() {
-    let (error, path) = error_of("mtllib scene.mtl\no a\nusemtl white\nv 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", Some(MTL));
-    assert_eq!(error, format!("{}: the scene has no faces with non-zero area", path.display()));
+    let (error, path) = error_of(
+        "mtllib scene.mtl\no a\nusemtl white\nv 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n",
+        Some(MTL),
+    );
+    assert_eq!(
+        error,
+        format!(
+            "{}: the scene has no faces with non-zero area",
+            path.display()
+        )
+    );
 }
 
 #[test]
 fn a_view_line_is_parsed_and_a_bad_one_names_its_line() {
-    let obj = format!("#@view eye 0 1 -5 target 0 1 0 up 0 1 0 fov 40\nmtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 3\n");
+    let obj = format!(
+        "#@view eye 0 1 -5 target 0 1 0 up 0 1 0 fov 40\nmtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 3\n"
+    );
     let (scene, _, _folder) = load(&obj, Some(MTL));
     let view = scene.expect("loads").view.expect("has a view");
     assert_eq!((view.eye.z, view.vertical_fov_degrees), (-5.0, 40.0));
-    let (error, path) = error_of(&format!("mtllib scene.mtl\n#@view eye 0 1 -5 target 0 1 0 up 0 1 0 fov 400\no a\nusemtl white\n{SQUARE}f 1 2 3\n"), Some(MTL));
-    assert_eq!(error, format!("{}:2: the view needs eye != target, a non-zero up and a fov in (0, 180)", path.display()));
+    let (error, path) = error_of(
+        &format!(
+            "mtllib scene.mtl\n#@view eye 0 1 -5 target 0 1 0 up 0 1 0 fov 400\no a\nusemtl white\n{SQUARE}f 1 2 3\n"
+        ),
+        Some(MTL),
+    );
+    assert_eq!(
+        error,
+        format!(
+            "{}:2: the view needs eye != target, a non-zero up and a fov in (0, 180)",
+            path.display()
+        )
+    );
 }

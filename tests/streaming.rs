@@ -19,7 +19,9 @@ const TOKEN: &str = "test-token";
 const PATIENCE: Duration = Duration::from_secs(60);
 
 async fn serve(shared: Arc<Shared>) -> SocketAddr {
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind an ephemeral port");
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .expect("bind an ephemeral port");
     let address = listener.local_addr().unwrap();
     tokio::spawn(routes::serve(listener, shared));
     address
@@ -27,12 +29,17 @@ async fn serve(shared: Arc<Shared>) -> SocketAddr {
 
 /// Serves the Cornell box, solving in the background; returns before the solve ends.
 async fn cornell_server(limits: Limits) -> (SocketAddr, Arc<Shared>) {
-    let request = SolveRequest { patches: PatchTarget::Count(400), ..SolveRequest::default() };
+    let request = SolveRequest {
+        patches: PatchTarget::Count(400),
+        ..SolveRequest::default()
+    };
     let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).expect("scene loads");
     let shared = shared_for(&prepared, limits, TOKEN.into());
     let address = serve(shared.clone()).await;
     let solving = shared.clone();
-    tokio::task::spawn_blocking(move || solve_and_publish(&prepared, &solving, None).expect("solves"));
+    tokio::task::spawn_blocking(move || {
+        solve_and_publish(&prepared, &solving, None).expect("solves")
+    });
     (address, shared)
 }
 
@@ -63,22 +70,34 @@ async fn synthetic_server(patches: u32, limits: Limits) -> (SocketAddr, Arc<Shar
 fn noise(patches: u32, seed: u64) -> Vec<[f32; 3]> {
     (0..patches as u64)
         .map(|i| {
-            let x = (i.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(seed.wrapping_mul(1_442_695_040_888_963_407)) >> 40) as f32;
+            let x = (i
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(seed.wrapping_mul(1_442_695_040_888_963_407))
+                >> 40) as f32;
             [x, x * 0.5 + 1.0, 1.0 + seed as f32]
         })
         .collect()
 }
 
-type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+type Socket =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
 async fn connect(address: SocketAddr) -> Socket {
-    tokio_tungstenite::connect_async(format!("ws://{address}/ws")).await.expect("connects").0
+    tokio_tungstenite::connect_async(format!("ws://{address}/ws"))
+        .await
+        .expect("connects")
+        .0
 }
 
 async fn next_message(socket: &mut Socket) -> ServerMessage {
     loop {
-        match tokio::time::timeout(PATIENCE, socket.next()).await.expect("a message in time") {
-            Some(Ok(Message::Binary(bytes))) => return ServerMessage::decode(&bytes).expect("decodes"),
+        match tokio::time::timeout(PATIENCE, socket.next())
+            .await
+            .expect("a message in time")
+        {
+            Some(Ok(Message::Binary(bytes))) => {
+                return ServerMessage::decode(&bytes).expect("decodes");
+            }
             Some(Ok(Message::Ping(_) | Message::Pong(_))) => continue,
             other => panic!("expected a binary message, got {other:?}"),
         }
@@ -88,11 +107,17 @@ async fn next_message(socket: &mut Socket) -> ServerMessage {
 /// Reads frames until the buffer holds `version` (or a final frame when `None`).
 async fn follow(socket: &mut Socket, until: Option<u64>) -> PatchBuffer {
     let mut buffer = PatchBuffer::default();
-    assert!(matches!(next_message(socket).await, ServerMessage::Hello(_)));
+    assert!(matches!(
+        next_message(socket).await,
+        ServerMessage::Hello(_)
+    ));
     loop {
         let message = next_message(socket).await;
         if buffer.apply(&message).is_err() {
-            socket.send(Message::Binary(ClientMessage::RequestFull.encode().into())).await.unwrap();
+            socket
+                .send(Message::Binary(ClientMessage::RequestFull.encode().into()))
+                .await
+                .unwrap();
             continue;
         }
         let info = buffer.info.unwrap();
@@ -114,20 +139,38 @@ async fn several_viewers_end_with_the_servers_buffer() {
         .collect();
     let mut checksums = Vec::new();
     for viewer in viewers {
-        checksums.push(wire::checksum(&viewer.await.unwrap().expect("viewer finishes").buffer.colours));
+        checksums.push(wire::checksum(
+            &viewer
+                .await
+                .unwrap()
+                .expect("viewer finishes")
+                .buffer
+                .colours,
+        ));
     }
     let summary = routes::solution_summary(&shared);
     assert!(summary.is_final);
-    assert!(checksums.iter().all(|c| *c == summary.checksum), "{checksums:?} vs {}", summary.checksum);
+    assert!(
+        checksums.iter().all(|c| *c == summary.checksum),
+        "{checksums:?} vs {}",
+        summary.checksum
+    );
     // The same summary over HTTP, as a viewer in another language would read it.
     let base = client::http_base(&url).unwrap();
-    let json = tokio::task::spawn_blocking(move || client::fetch_solution(&base)).await.unwrap().unwrap();
+    let json = tokio::task::spawn_blocking(move || client::fetch_solution(&base))
+        .await
+        .unwrap()
+        .unwrap();
     assert_eq!(json["checksum"].as_u64(), Some(summary.checksum as u64));
     assert_eq!(json["report"]["method"], "gmres");
-    let glb = tokio::task::spawn_blocking(move || client::http_get(&format!("http://{address}/api/scene.glb"), 1 << 26)).await.unwrap().unwrap();
+    let glb = tokio::task::spawn_blocking(move || {
+        client::http_get(&format!("http://{address}/api/scene.glb"), 1 << 26)
+    })
+    .await
+    .unwrap()
+    .unwrap();
     assert_eq!(&glb[..4], b"glTF");
 }
-
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_late_joiner_gets_the_current_state_at_once() {
@@ -135,12 +178,22 @@ async fn a_late_joiner_gets_the_current_state_at_once() {
     shared.hub.publish(&noise(100, 1), false);
     let version = shared.hub.publish(&noise(100, 2), true);
     let mut socket = connect(address).await;
-    let ServerMessage::Hello(hello) = next_message(&mut socket).await else { panic!("hello first") };
+    let ServerMessage::Hello(hello) = next_message(&mut socket).await else {
+        panic!("hello first")
+    };
     assert_eq!((hello.patch_count, hello.scene_id), (100, 7));
     // The very next message is the whole current state, final.
-    let ServerMessage::Full(frame) = next_message(&mut socket).await else { panic!("a full frame second") };
-    assert_eq!((frame.info.solution_version, frame.info.is_final), (version, true));
-    assert_eq!(wire::checksum(&frame.colours), shared.hub.current().checksum);
+    let ServerMessage::Full(frame) = next_message(&mut socket).await else {
+        panic!("a full frame second")
+    };
+    assert_eq!(
+        (frame.info.solution_version, frame.info.is_final),
+        (version, true)
+    );
+    assert_eq!(
+        wire::checksum(&frame.colours),
+        shared.hub.current().checksum
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -156,16 +209,24 @@ async fn later_versions_arrive_as_deltas_of_only_the_changed_patches() {
     next[10] = [3.0, 1.0, 1.0];
     next[900] = [4.0, 2.0, 1.0];
     let version = shared.hub.publish(&next, true);
-    let ServerMessage::Delta(delta) = next_message(&mut socket).await else { panic!("a delta") };
+    let ServerMessage::Delta(delta) = next_message(&mut socket).await else {
+        panic!("a delta")
+    };
     assert_eq!(delta.indices, [10, 900]);
     buffer.apply(&ServerMessage::Delta(delta)).unwrap();
     assert_eq!(buffer.info.unwrap().solution_version, version);
-    assert_eq!(wire::checksum(&buffer.colours), shared.hub.current().checksum);
+    assert_eq!(
+        wire::checksum(&buffer.colours),
+        shared.hub.current().checksum
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_stalled_viewer_neither_delays_others_nor_holds_memory() {
-    let limits = Limits { send_timeout: Duration::from_millis(300), ..Limits::default() };
+    let limits = Limits {
+        send_timeout: Duration::from_millis(300),
+        ..Limits::default()
+    };
     let patches = 50_000; // 200 KB frames: socket buffers fill after a few dozen
     let (address, shared) = synthetic_server(patches, limits).await;
     // The stalled viewer completes the handshake and then never reads.
@@ -178,16 +239,25 @@ async fn a_stalled_viewer_neither_delays_others_nor_holds_memory() {
         while buffer.info.unwrap().solution_version < last {
             let message = next_message(&mut healthy).await;
             if buffer.apply(&message).is_err() {
-                healthy.send(Message::Binary(ClientMessage::RequestFull.encode().into())).await.unwrap();
+                healthy
+                    .send(Message::Binary(ClientMessage::RequestFull.encode().into()))
+                    .await
+                    .unwrap();
             }
         }
     }
-    assert_eq!(wire::checksum(&buffer.colours), shared.hub.current().checksum);
+    assert_eq!(
+        wire::checksum(&buffer.colours),
+        shared.hub.current().checksum
+    );
     // The stalled viewer was dropped for it (its socket buffers full), which frees its state.
     let metrics = &shared.metrics;
     let deadline = tokio::time::Instant::now() + PATIENCE;
     while metrics.dropped_count(server::metrics::DropReason::Slow) == 0 {
-        assert!(tokio::time::Instant::now() < deadline, "the stalled viewer was never dropped");
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the stalled viewer was never dropped"
+        );
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     assert_eq!(metrics.viewers.load(Ordering::Relaxed), 1);
@@ -198,12 +268,19 @@ async fn garbage_and_oversized_messages_are_refused_without_harming_others() {
     let (address, shared) = synthetic_server(100, Limits::default()).await;
     let mut healthy = connect(address).await;
     follow(&mut healthy, Some(1)).await;
-    for hostile in [Message::Text("hello".into()), Message::Binary(vec![0xFF; 3].into()), Message::Binary(vec![16u8; 100_000].into())] {
+    for hostile in [
+        Message::Text("hello".into()),
+        Message::Binary(vec![0xFF; 3].into()),
+        Message::Binary(vec![16u8; 100_000].into()),
+    ] {
         let mut socket = connect(address).await;
         socket.send(hostile).await.unwrap();
         // The server closes it with a reason; nothing else.
         let closed = loop {
-            match tokio::time::timeout(PATIENCE, socket.next()).await.expect("closed in time") {
+            match tokio::time::timeout(PATIENCE, socket.next())
+                .await
+                .expect("closed in time")
+            {
                 Some(Ok(Message::Close(frame))) => break frame,
                 Some(Ok(_)) => continue,
                 Some(Err(_)) | None => break None,
@@ -214,7 +291,10 @@ async fn garbage_and_oversized_messages_are_refused_without_harming_others() {
         }
     }
     let metrics = &shared.metrics;
-    assert_eq!(metrics.dropped_count(server::metrics::DropReason::BadMessage), 3);
+    assert_eq!(
+        metrics.dropped_count(server::metrics::DropReason::BadMessage),
+        3
+    );
     // The healthy viewer still gets new versions.
     let version = shared.hub.publish(&noise(100, 3), true);
     let buffer = follow_delta_or_full(&mut healthy, version).await;
@@ -224,7 +304,10 @@ async fn garbage_and_oversized_messages_are_refused_without_harming_others() {
 /// Reads until a frame of `version` arrives and returns its full colours (via a resync if
 /// needed, since this helper holds no earlier buffer).
 async fn follow_delta_or_full(socket: &mut Socket, version: u64) -> Vec<u32> {
-    socket.send(Message::Binary(ClientMessage::RequestFull.encode().into())).await.unwrap();
+    socket
+        .send(Message::Binary(ClientMessage::RequestFull.encode().into()))
+        .await
+        .unwrap();
     loop {
         if let ServerMessage::Full(frame) = next_message(socket).await
             && frame.info.solution_version == version
@@ -236,22 +319,44 @@ async fn follow_delta_or_full(socket: &mut Socket, version: u64) -> Vec<u32> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn viewers_past_the_limit_are_refused_cleanly() {
-    let (address, shared) = synthetic_server(10, Limits { max_viewers: 2, ..Limits::default() }).await;
+    let (address, shared) = synthetic_server(
+        10,
+        Limits {
+            max_viewers: 2,
+            ..Limits::default()
+        },
+    )
+    .await;
     let _a = connect(address).await;
     let _b = connect(address).await;
-    let refused = tokio_tungstenite::connect_async(format!("ws://{address}/ws")).await.expect_err("third is refused");
+    let refused = tokio_tungstenite::connect_async(format!("ws://{address}/ws"))
+        .await
+        .expect_err("third is refused");
     assert!(refused.to_string().contains("503"), "{refused}");
     assert_eq!(shared.metrics.refused.load(Ordering::Relaxed), 1);
     let text = shared.metrics.render(10, 1, false);
-    assert!(text.contains("radcast_viewers 2\n") && text.contains("radcast_viewers_refused_total{limit=\"server\"} 1\n"), "{text}");
+    assert!(
+        text.contains("radcast_viewers 2\n")
+            && text.contains("radcast_viewers_refused_total{limit=\"server\"} 1\n"),
+        "{text}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn one_address_past_its_limit_is_refused_and_its_slots_come_back() {
-    let (address, shared) = synthetic_server(10, Limits { max_viewers_per_ip: 2, ..Limits::default() }).await;
+    let (address, shared) = synthetic_server(
+        10,
+        Limits {
+            max_viewers_per_ip: 2,
+            ..Limits::default()
+        },
+    )
+    .await;
     let a = connect(address).await;
     let _b = connect(address).await;
-    let refused = tokio_tungstenite::connect_async(format!("ws://{address}/ws")).await.expect_err("third from one address");
+    let refused = tokio_tungstenite::connect_async(format!("ws://{address}/ws"))
+        .await
+        .expect_err("third from one address");
     assert!(refused.to_string().contains("429"), "{refused}");
     assert_eq!(shared.metrics.refused_per_ip.load(Ordering::Relaxed), 1);
     // When one leaves, its place is free again.
@@ -260,7 +365,10 @@ async fn one_address_past_its_limit_is_refused_and_its_slots_come_back() {
     loop {
         match tokio_tungstenite::connect_async(format!("ws://{address}/ws")).await {
             Ok(_) => break,
-            Err(_) => assert!(tokio::time::Instant::now() < deadline, "the slot never came back"),
+            Err(_) => assert!(
+                tokio::time::Instant::now() < deadline,
+                "the slot never came back"
+            ),
         }
         tokio::task::yield_now().await;
     }
@@ -270,11 +378,20 @@ async fn one_address_past_its_limit_is_refused_and_its_slots_come_back() {
 async fn the_rendered_cornell_box_has_red_left_and_green_right() {
     let (address, _shared) = cornell_server(Limits::default()).await;
     let url = format!("ws://{address}/ws");
-    let outcome = client::session::watch_until_final(&url, PATIENCE).await.expect("final frame");
+    let outcome = client::session::watch_until_final(&url, PATIENCE)
+        .await
+        .expect("final frame");
     let base = client::http_base(&url).unwrap();
-    let geometry = tokio::task::spawn_blocking(move || client::fetch_geometry(&base)).await.unwrap().unwrap();
+    let geometry = tokio::task::spawn_blocking(move || client::fetch_geometry(&base))
+        .await
+        .unwrap()
+        .unwrap();
     let view = client::render::View::for_scene(&geometry);
-    assert_eq!(view.eye.to_array(), [278.0, 273.0, -800.0], "the published Cornell camera");
+    assert_eq!(
+        view.eye.to_array(),
+        [278.0, 273.0, -800.0],
+        "the published Cornell camera"
+    );
     let image = client::render::render(&geometry, &outcome.buffer, &view, 128, 128);
     let mean = |x0: u32, x1: u32| {
         let mut sum = [0.0f64; 3];
@@ -287,9 +404,15 @@ async fn the_rendered_cornell_box_has_red_left_and_green_right() {
         sum.map(|s| s / ((x1 - x0) * 48) as f64)
     };
     let (left, right) = (mean(4, 20), mean(108, 124));
-    assert!(left[0] > 2.0 * left[1] && left[0] > 2.0 * left[2] && left[0] > 60.0, "left wall {left:?}");
+    assert!(
+        left[0] > 2.0 * left[1] && left[0] > 2.0 * left[2] && left[0] > 60.0,
+        "left wall {left:?}"
+    );
     // Green dominates; the tone curve compresses the linear G/R of about 2.2 to about 1.35.
-    assert!(right[1] > 1.25 * right[0] && right[1] > 2.0 * right[2] && right[1] > 60.0, "right wall {right:?}");
+    assert!(
+        right[1] > 1.25 * right[0] && right[1] > 2.0 * right[2] && right[1] > 60.0,
+        "right wall {right:?}"
+    );
     let brightness = image.rgb.iter().map(|&b| b as f64).sum::<f64>() / image.rgb.len() as f64;
     assert!(brightness > 40.0, "the image is too dark: {brightness}");
 }
@@ -297,7 +420,10 @@ async fn the_rendered_cornell_box_has_red_left_and_green_right() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_restart_serves_the_cached_solution_and_ignores_a_corrupt_cache() {
     let cache = tempfile::tempdir().unwrap();
-    let request = SolveRequest { patches: PatchTarget::Count(150), ..SolveRequest::default() };
+    let request = SolveRequest {
+        patches: PatchTarget::Count(150),
+        ..SolveRequest::default()
+    };
     let solve_once = |cache: std::path::PathBuf| {
         tokio::task::spawn_blocking(move || {
             let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).unwrap();
@@ -307,18 +433,36 @@ async fn a_restart_serves_the_cached_solution_and_ignores_a_corrupt_cache() {
         })
     };
     let first = solve_once(cache.path().into()).await.unwrap();
-    let files: Vec<_> = std::fs::read_dir(cache.path()).unwrap().map(|e| e.unwrap().path()).collect();
-    assert_eq!(files.len(), 1, "one cache file and no temporary leftovers: {files:?}");
+    let files: Vec<_> = std::fs::read_dir(cache.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(
+        files.len(),
+        1,
+        "one cache file and no temporary leftovers: {files:?}"
+    );
     let second = solve_once(cache.path().into()).await.unwrap();
     assert_eq!((second.checksum, second.is_final), (first.checksum, true));
     assert_eq!(second.report, first.report);
     // A truncated cache file is not trusted: the server solves again and rewrites it.
     let length = std::fs::metadata(&files[0]).unwrap().len();
-    std::fs::OpenOptions::new().write(true).open(&files[0]).unwrap().set_len(length / 2).unwrap();
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&files[0])
+        .unwrap()
+        .set_len(length / 2)
+        .unwrap();
     let third = solve_once(cache.path().into()).await.unwrap();
     assert_eq!(third.checksum, first.checksum);
-    assert_ne!(third.report, first.report, "a fresh solve has fresh timings");
+    assert_ne!(
+        third.report, first.report,
+        "a fresh solve has fresh timings"
+    );
     // ...and the rewritten file serves the next start.
     let fourth = solve_once(cache.path().into()).await.unwrap();
-    assert_eq!((fourth.checksum, &fourth.report), (first.checksum, &third.report));
+    assert_eq!(
+        (fourth.checksum, &fourth.report),
+        (first.checksum, &third.report)
+    );
 }

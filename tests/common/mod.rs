@@ -3,18 +3,34 @@
 
 use glam::{DVec3, dvec3};
 use solver::visibility::Occluders;
-use solver::{DenseFormFactors, FormFactorSettings, Material, Mesh, PatchTarget, Rgb, Scene, Solved};
+use solver::{
+    DenseFormFactors, FormFactorSettings, Material, Mesh, PatchTarget, Rgb, Scene, Solved,
+};
 use std::f64::consts::PI;
 
 /// A grey material.
 pub fn grey(reflectance: f64, emission: f64) -> Material {
-    Material { reflectance: Rgb::splat(reflectance), emission: Rgb::splat(emission) }
+    Material {
+        reflectance: Rgb::splat(reflectance),
+        emission: Rgb::splat(emission),
+    }
 }
 
 /// Adds the parallelogram `origin, origin + u, origin + u + v, origin + v`; its front is `u x v`.
-pub fn add_rect(scene: &mut Scene, name: &str, origin: DVec3, u: DVec3, v: DVec3, material: Material) -> u32 {
+pub fn add_rect(
+    scene: &mut Scene,
+    name: &str,
+    origin: DVec3,
+    u: DVec3,
+    v: DVec3,
+    material: Material,
+) -> u32 {
     let object = scene.add_object(name);
-    scene.add_polygon(object, &[origin, origin + u, origin + u + v, origin + v], material);
+    scene.add_polygon(
+        object,
+        &[origin, origin + u, origin + u + v, origin + v],
+        material,
+    );
     object
 }
 
@@ -37,7 +53,14 @@ pub fn occluded_furnace(material: Material) -> Scene {
     let mut scene = closed_cube(3.0, material);
     let o = dvec3(1.0, 1.0, 1.0);
     let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
-    for (origin, u, v) in [(o, x, z), (o + y, z, x), (o, z, y), (o + x, y, z), (o, y, x), (o + z, x, y)] {
+    for (origin, u, v) in [
+        (o, x, z),
+        (o + y, z, x),
+        (o, z, y),
+        (o + x, y, z),
+        (o, y, x),
+        (o + z, x, y),
+    ] {
         add_rect(&mut scene, "block", origin, u, v, material);
     }
     scene
@@ -49,31 +72,71 @@ pub fn two_rooms_one_lamp() -> Scene {
     let mut scene = Scene::default();
     let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
     for (room, origin) in [("a", DVec3::ZERO), ("b", x)] {
-        for (corner, u, v) in [(origin, z, x), (origin + y, x, z), (origin, y, z), (origin + x, z, y), (origin, x, y), (origin + z, y, x)] {
+        for (corner, u, v) in [
+            (origin, z, x),
+            (origin + y, x, z),
+            (origin, y, z),
+            (origin + x, z, y),
+            (origin, x, y),
+            (origin + z, y, x),
+        ] {
             add_rect(&mut scene, room, corner, u, v, grey(0.7, 0.0));
         }
     }
-    add_rect(&mut scene, "lamp", dvec3(0.4, 0.999, 0.4), DVec3::X * 0.2, DVec3::Z * 0.2, grey(0.0, 10.0));
+    add_rect(
+        &mut scene,
+        "lamp",
+        dvec3(0.4, 0.999, 0.4),
+        DVec3::X * 0.2,
+        DVec3::Z * 0.2,
+        grey(0.0, 10.0),
+    );
     scene
 }
 
 /// Area-weighted mean radiosity of `object` in a solved scene.
 pub fn mean_of(solved: &Solved, object: &str) -> Rgb {
-    let o = solved.report.objects.iter().find(|o| o.name == object).expect("object exists");
+    let o = solved
+        .report
+        .objects
+        .iter()
+        .find(|o| o.name == object)
+        .expect("object exists");
     Rgb::from(o.radiosity)
 }
 
 /// The largest channel of every patch of `object`.
 pub fn brightness_of(solved: &Solved, object: &str) -> Vec<f64> {
-    solved.mesh.patches.iter().zip(&solved.radiosity).filter(|(p, _)| solved.scene.objects[p.object as usize].name == object).map(|(_, b)| b.max_element()).collect()
+    solved
+        .mesh
+        .patches
+        .iter()
+        .zip(&solved.radiosity)
+        .filter(|(p, _)| solved.scene.objects[p.object as usize].name == object)
+        .map(|(_, b)| b.max_element())
+        .collect()
 }
 
 /// Two directly opposed `a x b` rectangles a distance `c` apart: "receiver" at z = 0 facing +z,
 /// "emitter" at z = c facing -z.
 pub fn parallel_plates(a: f64, b: f64, c: f64, receiver: Material, emitter: Material) -> Scene {
     let mut scene = Scene::default();
-    add_rect(&mut scene, "receiver", DVec3::ZERO, DVec3::X * a, DVec3::Y * b, receiver);
-    add_rect(&mut scene, "emitter", dvec3(0.0, 0.0, c), DVec3::Y * b, DVec3::X * a, emitter);
+    add_rect(
+        &mut scene,
+        "receiver",
+        DVec3::ZERO,
+        DVec3::X * a,
+        DVec3::Y * b,
+        receiver,
+    );
+    add_rect(
+        &mut scene,
+        "emitter",
+        dvec3(0.0, 0.0, c),
+        DVec3::Y * b,
+        DVec3::X * a,
+        emitter,
+    );
     scene
 }
 
@@ -81,8 +144,22 @@ pub fn parallel_plates(a: f64, b: f64, c: f64, receiver: Material, emitter: Mate
 /// and "wall" (height `h`, on x = 0).
 pub fn hinge(w: f64, h: f64, l: f64, floor: Material, wall: Material) -> Scene {
     let mut scene = Scene::default();
-    add_rect(&mut scene, "floor", DVec3::ZERO, DVec3::Z * l, DVec3::X * w, floor);
-    add_rect(&mut scene, "wall", DVec3::ZERO, DVec3::Y * h, DVec3::Z * l, wall);
+    add_rect(
+        &mut scene,
+        "floor",
+        DVec3::ZERO,
+        DVec3::Z * l,
+        DVec3::X * w,
+        floor,
+    );
+    add_rect(
+        &mut scene,
+        "wall",
+        DVec3::ZERO,
+        DVec3::Y * h,
+        DVec3::Z * l,
+        wall,
+    );
     scene
 }
 
@@ -91,7 +168,8 @@ pub fn howell_parallel(a: f64, b: f64, c: f64) -> f64 {
     let (x, y) = (a / c, b / c);
     let (x2, y2) = (x * x, y * y);
     2.0 / (PI * x * y)
-        * ((((1.0 + x2) * (1.0 + y2)) / (1.0 + x2 + y2)).sqrt().ln() + x * (1.0 + y2).sqrt() * (x / (1.0 + y2).sqrt()).atan()
+        * ((((1.0 + x2) * (1.0 + y2)) / (1.0 + x2 + y2)).sqrt().ln()
+            + x * (1.0 + y2).sqrt() * (x / (1.0 + y2).sqrt()).atan()
             + y * (1.0 + x2).sqrt() * (y / (1.0 + x2).sqrt()).atan()
             - x * x.atan()
             - y * y.atan())
@@ -106,23 +184,42 @@ pub fn howell_perpendicular(w: f64, h: f64, l: f64) -> f64 {
     let log_term = ((1.0 + w2) * (1.0 + h2) / (1.0 + w2 + h2)).ln()
         + w2 * (w2 * (1.0 + w2 + h2) / ((1.0 + w2) * (w2 + h2))).ln()
         + h2 * (h2 * (1.0 + w2 + h2) / ((1.0 + h2) * (h2 + w2))).ln();
-    1.0 / (PI * w) * (w * (1.0 / w).atan() + h * (1.0 / h).atan() - root * (1.0 / root).atan() + 0.25 * log_term)
+    1.0 / (PI * w)
+        * (w * (1.0 / w).atan() + h * (1.0 / h).atan() - root * (1.0 / root).atan()
+            + 0.25 * log_term)
 }
 
 /// Meshes `scene` and computes its dense form factors.
 pub fn form_factors(scene: &Scene, target: PatchTarget) -> (Mesh, DenseFormFactors) {
     let mesh = Mesh::build(scene, target);
     let occluders = Occluders::new(scene);
-    let factors = DenseFormFactors::compute(&mesh, &occluders, &FormFactorSettings::default(), &solver::no_progress);
+    let factors = DenseFormFactors::compute(
+        &mesh,
+        &occluders,
+        &FormFactorSettings::default(),
+        &solver::no_progress,
+    );
     (mesh, factors)
 }
 
 /// Area-weighted form factor from object `from` to object `to`: sum_i A_i sum_j F_ij / A_from.
 pub fn object_form_factor(mesh: &Mesh, factors: &DenseFormFactors, from: u32, to: u32) -> f64 {
     let (mut weighted, mut area) = (0.0, 0.0);
-    for (i, p) in mesh.patches.iter().enumerate().filter(|(_, p)| p.object == from) {
+    for (i, p) in mesh
+        .patches
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.object == from)
+    {
         area += p.area;
-        weighted += p.area * mesh.patches.iter().enumerate().filter(|(_, q)| q.object == to).map(|(j, _)| factors.get(i, j)).sum::<f64>();
+        weighted += p.area
+            * mesh
+                .patches
+                .iter()
+                .enumerate()
+                .filter(|(_, q)| q.object == to)
+                .map(|(j, _)| factors.get(i, j))
+                .sum::<f64>();
     }
     weighted / area
 }

@@ -9,7 +9,9 @@ use anyhow::{Context, bail};
 
 /// The HTTP base (`http://host:port`) of a viewer URL like `ws://host:port/ws`.
 pub fn http_base(ws_url: &str) -> anyhow::Result<String> {
-    let rest = ws_url.strip_prefix("ws://").with_context(|| format!("'{ws_url}' is not a ws:// URL (TLS is not supported)"))?;
+    let rest = ws_url
+        .strip_prefix("ws://")
+        .with_context(|| format!("'{ws_url}' is not a ws:// URL (TLS is not supported)"))?;
     let authority = rest.split('/').next().unwrap_or_default();
     if authority.is_empty() {
         bail!("'{ws_url}' has no host");
@@ -19,8 +21,15 @@ pub fn http_base(ws_url: &str) -> anyhow::Result<String> {
 
 /// GETs `url` (blocking) and returns the body, refusing bodies over `limit` bytes.
 pub fn http_get(url: &str, limit: u64) -> anyhow::Result<Vec<u8>> {
-    let mut response = ureq::get(url).call().with_context(|| format!("GET {url}"))?;
-    response.body_mut().with_config().limit(limit).read_to_vec().with_context(|| format!("reading the body of {url}"))
+    let mut response = ureq::get(url)
+        .call()
+        .with_context(|| format!("GET {url}"))?;
+    response
+        .body_mut()
+        .with_config()
+        .limit(limit)
+        .read_to_vec()
+        .with_context(|| format!("reading the body of {url}"))
 }
 
 /// The scene geometry from `/api/scene`.
@@ -31,7 +40,8 @@ pub fn fetch_geometry(base: &str) -> anyhow::Result<wire::Geometry> {
 
 /// `/metrics` as text.
 pub fn fetch_metrics(base: &str) -> anyhow::Result<String> {
-    String::from_utf8(http_get(&format!("{base}/metrics"), 1 << 20)?).with_context(|| format!("{base}/metrics is not UTF-8"))
+    String::from_utf8(http_get(&format!("{base}/metrics"), 1 << 20)?)
+        .with_context(|| format!("{base}/metrics is not UTF-8"))
 }
 
 /// Raises this process's open-file limit to the hard limit (one descriptor per viewer).

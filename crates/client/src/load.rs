@@ -33,14 +33,24 @@ pub struct ViewerStats {
 }
 
 fn now_micros() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_micros() as u64)
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64)
 }
 
 /// Connects with buffers sized for one viewer of many: tungstenite's 128 KiB defaults, times
 /// thousands of viewers in one process, cost more than the frames themselves.
-async fn connect(url: &str) -> Result<crate::session::Socket, tokio_tungstenite::tungstenite::Error> {
-    let config = tokio_tungstenite::tungstenite::protocol::WebSocketConfig::default().read_buffer_size(16 * 1024).write_buffer_size(0);
-    Ok(tokio_tungstenite::connect_async_with_config(url, Some(config), false).await?.0)
+async fn connect(
+    url: &str,
+) -> Result<crate::session::Socket, tokio_tungstenite::tungstenite::Error> {
+    let config = tokio_tungstenite::tungstenite::protocol::WebSocketConfig::default()
+        .read_buffer_size(16 * 1024)
+        .write_buffer_size(0);
+    Ok(
+        tokio_tungstenite::connect_async_with_config(url, Some(config), false)
+            .await?
+            .0,
+    )
 }
 
 /// One viewer: connect after `delay`, follow frames until `deadline`.
@@ -48,7 +58,11 @@ pub async fn run_viewer(url: String, delay: Duration, deadline: Instant) -> View
     tokio::time::sleep(delay).await; // the ramp: spreads connection attempts, not synchronisation
     let mut stats = ViewerStats::default();
     let start = Instant::now();
-    let connected = tokio::time::timeout(deadline.saturating_duration_since(Instant::now()), connect(&url)).await;
+    let connected = tokio::time::timeout(
+        deadline.saturating_duration_since(Instant::now()),
+        connect(&url),
+    )
+    .await;
     let mut socket = match connected {
         Ok(Ok(socket)) => socket,
         Ok(Err(error)) => {
@@ -65,7 +79,11 @@ pub async fn run_viewer(url: String, delay: Duration, deadline: Instant) -> View
     let joined_at = now_micros();
     let mut buffer = PatchBuffer::default();
     loop {
-        let next = tokio::time::timeout(deadline.saturating_duration_since(Instant::now()), socket.next()).await;
+        let next = tokio::time::timeout(
+            deadline.saturating_duration_since(Instant::now()),
+            socket.next(),
+        )
+        .await;
         let data = match next {
             Err(_) => break, // the run is over
             Ok(Some(Ok(Message::Binary(data)))) => data,
@@ -104,7 +122,11 @@ pub async fn run_viewer(url: String, delay: Duration, deadline: Instant) -> View
             }
             Err(ApplyError::BaseMismatch { .. }) => {
                 stats.resyncs += 1;
-                if socket.send(Message::Binary(ClientMessage::RequestFull.encode().into())).await.is_err() {
+                if socket
+                    .send(Message::Binary(ClientMessage::RequestFull.encode().into()))
+                    .await
+                    .is_err()
+                {
                     break;
                 }
             }
@@ -134,8 +156,16 @@ impl Percentiles {
             return Percentiles::default();
         }
         values.sort_unstable();
-        let rank = |q: f64| values[((q * values.len() as f64).ceil() as usize).clamp(1, values.len()) - 1] as f64 / 1e3;
-        Percentiles { p50: rank(0.50), p90: rank(0.90), p99: rank(0.99), max: *values.last().unwrap_or(&0) as f64 / 1e3 }
+        let rank = |q: f64| {
+            values[((q * values.len() as f64).ceil() as usize).clamp(1, values.len()) - 1] as f64
+                / 1e3
+        };
+        Percentiles {
+            p50: rank(0.50),
+            p90: rank(0.90),
+            p99: rank(0.99),
+            max: *values.last().unwrap_or(&0) as f64 / 1e3,
+        }
     }
 }
 
@@ -193,15 +223,27 @@ pub fn edit_latencies(stats: &[ViewerStats], edits_us: &[u64]) -> Vec<f64> {
             let per_viewer: Option<Vec<u64>> = stats
                 .iter()
                 .filter(|s| s.connected)
-                .map(|s| s.arrivals.iter().find(|(sent, _)| *sent >= edit).map(|(_, received)| received.saturating_sub(edit)))
+                .map(|s| {
+                    s.arrivals
+                        .iter()
+                        .find(|(sent, _)| *sent >= edit)
+                        .map(|(_, received)| received.saturating_sub(edit))
+                })
                 .collect();
-            per_viewer.and_then(|v| v.into_iter().max()).map(|us| us as f64 / 1e3)
+            per_viewer
+                .and_then(|v| v.into_iter().max())
+                .map(|us| us as f64 / 1e3)
         })
         .collect()
 }
 
 /// Aggregates per-viewer stats.
-pub fn summarize(stats: Vec<ViewerStats>, server: Vec<(String, f64)>, load_tester_cpu_percent: Option<f64>, edits_us: &[u64]) -> LoadReport {
+pub fn summarize(
+    stats: Vec<ViewerStats>,
+    server: Vec<(String, f64)>,
+    load_tester_cpu_percent: Option<f64>,
+    edits_us: &[u64],
+) -> LoadReport {
     let clients = stats.len();
     let connected: Vec<&ViewerStats> = stats.iter().filter(|s| s.connected).collect();
     let mut failures: Vec<(String, usize)> = Vec::new();
@@ -220,11 +262,24 @@ pub fn summarize(stats: Vec<ViewerStats>, server: Vec<(String, f64)>, load_teste
         failed: stats.iter().filter(|s| s.failure.is_some()).count(),
         failures,
         connect_ms: Percentiles::of(connected.iter().map(|s| micros(s.connect)).collect()),
-        first_frame_ms: Percentiles::of(connected.iter().filter_map(|s| s.first_frame.map(micros)).collect()),
-        latency_ms: Percentiles::of(stats.iter().flat_map(|s| s.latencies_us.iter().copied()).collect()),
+        first_frame_ms: Percentiles::of(
+            connected
+                .iter()
+                .filter_map(|s| s.first_frame.map(micros))
+                .collect(),
+        ),
+        latency_ms: Percentiles::of(
+            stats
+                .iter()
+                .flat_map(|s| s.latencies_us.iter().copied())
+                .collect(),
+        ),
         frames: stats.iter().map(|s| s.frames).sum(),
         bytes: stats.iter().map(|s| s.bytes).sum(),
-        frames_per_viewer: [connected.iter().map(|s| s.frames).min().unwrap_or(0), connected.iter().map(|s| s.frames).max().unwrap_or(0)],
+        frames_per_viewer: [
+            connected.iter().map(|s| s.frames).min().unwrap_or(0),
+            connected.iter().map(|s| s.frames).max().unwrap_or(0),
+        ],
         resyncs: stats.iter().map(|s| s.resyncs).sum(),
         edit_to_last_viewer_ms: edit_latencies(&stats, edits_us),
         load_tester_cpu_percent,
@@ -256,8 +311,15 @@ mod tests {
 
     #[test]
     fn edit_latency_is_the_slowest_viewers_first_frame_after_the_edit() {
-        let viewer = |arrivals: Vec<(u64, u64)>| ViewerStats { connected: true, arrivals, ..Default::default() };
-        let stats = [viewer(vec![(100, 150), (1000, 1010)]), viewer(vec![(100, 120), (1000, 1040), (2000, 2001)])];
+        let viewer = |arrivals: Vec<(u64, u64)>| ViewerStats {
+            connected: true,
+            arrivals,
+            ..Default::default()
+        };
+        let stats = [
+            viewer(vec![(100, 150), (1000, 1010)]),
+            viewer(vec![(100, 120), (1000, 1040), (2000, 2001)]),
+        ];
         assert_eq!(edit_latencies(&stats, &[990]), [0.05]);
         // An edit the first viewer never saw a frame for is left out.
         assert!(edit_latencies(&stats, &[1500]).is_empty());
@@ -265,7 +327,18 @@ mod tests {
 
     #[test]
     fn metrics_text_parses_with_labels() {
-        let parsed = parse_metrics("# HELP x y\nradcast_viewers 3\nradcast_viewers_dropped_total{reason=\"slow\"} 1\n");
-        assert_eq!(parsed, [("radcast_viewers".to_string(), 3.0), ("radcast_viewers_dropped_total{reason=\"slow\"}".to_string(), 1.0)]);
+        let parsed = parse_metrics(
+            "# HELP x y\nradcast_viewers 3\nradcast_viewers_dropped_total{reason=\"slow\"} 1\n",
+        );
+        assert_eq!(
+            parsed,
+            [
+                ("radcast_viewers".to_string(), 3.0),
+                (
+                    "radcast_viewers_dropped_total{reason=\"slow\"}".to_string(),
+                    1.0
+                )
+            ]
+        );
     }
 }

@@ -85,7 +85,13 @@ enum Command {
     },
 }
 
-fn output_path(out: &Path, viewer: usize, viewers: usize, camera: usize, cameras: usize) -> PathBuf {
+fn output_path(
+    out: &Path,
+    viewer: usize,
+    viewers: usize,
+    camera: usize,
+    cameras: usize,
+) -> PathBuf {
     let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("view");
     let mut name = stem.to_string();
     if viewers > 1 {
@@ -100,11 +106,37 @@ fn output_path(out: &Path, viewer: usize, viewers: usize, camera: usize, cameras
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
-        Command::View { url, out, cameras, width, height, clients, timeout } => view(url, out, cameras, width, height, clients, timeout).await,
-        Command::Watch { url, out_dir, updates } => watch(&url, out_dir, updates).await,
-        Command::Load { url, clients, ramp, duration, json, edit, edit_emission, token } => {
+        Command::View {
+            url,
+            out,
+            cameras,
+            width,
+            height,
+            clients,
+            timeout,
+        } => view(url, out, cameras, width, height, clients, timeout).await,
+        Command::Watch {
+            url,
+            out_dir,
+            updates,
+        } => watch(&url, out_dir, updates).await,
+        Command::Load {
+            url,
+            clients,
+            ramp,
+            duration,
+            json,
+            edit,
+            edit_emission,
+            token,
+        } => {
             let edits = match edit {
-                Some(object) => Some(Editor::new(&url, object, &edit_emission, token.unwrap_or_default())?),
+                Some(object) => Some(Editor::new(
+                    &url,
+                    object,
+                    &edit_emission,
+                    token.unwrap_or_default(),
+                )?),
                 None => None,
             };
             load(url, clients, ramp, duration, json, edits).await
@@ -113,7 +145,8 @@ async fn main() -> anyhow::Result<()> {
 }
 
 fn positive_seconds(value: f64, flag: &str) -> anyhow::Result<Duration> {
-    Duration::try_from_secs_f64(value).with_context(|| format!("--{flag} must be a non-negative number of seconds, got {value}"))
+    Duration::try_from_secs_f64(value)
+        .with_context(|| format!("--{flag} must be a non-negative number of seconds, got {value}"))
 }
 
 /// Emission edits issued during a load run.
@@ -125,9 +158,19 @@ struct Editor {
 
 impl Editor {
     fn new(ws_url: &str, object: String, emission: &str, token: String) -> anyhow::Result<Editor> {
-        let values: Vec<f64> = emission.split(',').map(|v| v.trim().parse::<f64>()).collect::<Result<_, _>>().with_context(|| format!("--edit-emission '{emission}' is not r,g,b"))?;
-        let [r, g, b] = values[..] else { bail!("--edit-emission '{emission}' needs three numbers") };
-        Ok(Editor { url: format!("{}/api/objects/{object}/emission", http_base(ws_url)?), token, emission: [r, g, b] })
+        let values: Vec<f64> = emission
+            .split(',')
+            .map(|v| v.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .with_context(|| format!("--edit-emission '{emission}' is not r,g,b"))?;
+        let [r, g, b] = values[..] else {
+            bail!("--edit-emission '{emission}' needs three numbers")
+        };
+        Ok(Editor {
+            url: format!("{}/api/objects/{object}/emission", http_base(ws_url)?),
+            token,
+            emission: [r, g, b],
+        })
     }
 
     /// Sends edit number `k` (half the emission when even, full when odd, so the first edit
@@ -135,26 +178,51 @@ impl Editor {
     fn send(&self, k: u64) -> anyhow::Result<u64> {
         let factor = if k % 2 == 0 { 0.5 } else { 1.0 };
         let body = serde_json::json!({ "emission": self.emission.map(|c| c * factor) }).to_string();
-        let at = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?.as_micros() as u64;
-        ureq::put(&self.url).header("Authorization", &format!("Bearer {}", self.token)).header("Content-Type", "application/json").send(body.as_bytes()).with_context(|| format!("PUT {}", self.url))?;
+        let at = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)?
+            .as_micros() as u64;
+        ureq::put(&self.url)
+            .header("Authorization", &format!("Bearer {}", self.token))
+            .header("Content-Type", "application/json")
+            .send(body.as_bytes())
+            .with_context(|| format!("PUT {}", self.url))?;
         Ok(at)
     }
 }
 
-async fn load(url: String, clients: usize, ramp: f64, duration: f64, json: bool, editor: Option<Editor>) -> anyhow::Result<()> {
+async fn load(
+    url: String,
+    clients: usize,
+    ramp: f64,
+    duration: f64,
+    json: bool,
+    editor: Option<Editor>,
+) -> anyhow::Result<()> {
     if clients == 0 {
         bail!("--clients must be at least 1");
     }
-    let (ramp, duration) = (positive_seconds(ramp, "ramp")?, positive_seconds(duration, "duration")?);
+    let (ramp, duration) = (
+        positive_seconds(ramp, "ramp")?,
+        positive_seconds(duration, "duration")?,
+    );
     let base = http_base(&url)?;
     let limit = client::raise_file_limit();
     if (limit as usize) < clients + 64 {
         eprintln!("warning: the open-file limit is {limit}; {clients} viewers may fail to connect");
     }
-    let (started, cpu_at_start) = (std::time::Instant::now(), client::load::process_cpu_seconds());
+    let (started, cpu_at_start) = (
+        std::time::Instant::now(),
+        client::load::process_cpu_seconds(),
+    );
     let deadline = started + ramp + duration;
     let viewers: Vec<_> = (0..clients)
-        .map(|k| tokio::spawn(client::load::run_viewer(url.clone(), ramp.mul_f64(k as f64 / clients as f64), deadline)))
+        .map(|k| {
+            tokio::spawn(client::load::run_viewer(
+                url.clone(),
+                ramp.mul_f64(k as f64 / clients as f64),
+                deadline,
+            ))
+        })
         .collect();
     // Edits start once every viewer is connected and stop a second before the end.
     let edits = editor.map(|editor| {
@@ -179,27 +247,60 @@ async fn load(url: String, clients: usize, ramp: f64, duration: f64, json: bool,
         Some(task) => task.await??,
         None => Vec::new(),
     };
-    let metrics = tokio::task::spawn_blocking(move || client::fetch_metrics(&base)).await?.map(|t| client::load::parse_metrics(&t)).unwrap_or_default();
-    let cpu = cpu_at_start.zip(client::load::process_cpu_seconds()).map(|(a, b)| 100.0 * (b - a) / started.elapsed().as_secs_f64());
+    let metrics = tokio::task::spawn_blocking(move || client::fetch_metrics(&base))
+        .await?
+        .map(|t| client::load::parse_metrics(&t))
+        .unwrap_or_default();
+    let cpu = cpu_at_start
+        .zip(client::load::process_cpu_seconds())
+        .map(|(a, b)| 100.0 * (b - a) / started.elapsed().as_secs_f64());
     let report = client::load::summarize(stats, metrics, cpu, &edit_times);
     if json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         let l = report.latency_ms;
-        println!("viewers   {} asked, {} connected, {} failed {:?}", report.clients, report.connected, report.failed, report.failures);
-        println!("connect   p50 {:.1} ms, p99 {:.1} ms; first frame p50 {:.1} ms, p99 {:.1} ms", report.connect_ms.p50, report.connect_ms.p99, report.first_frame_ms.p50, report.first_frame_ms.p99);
-        println!("latency   p50 {:.1} ms, p90 {:.1} ms, p99 {:.1} ms, max {:.1} ms", l.p50, l.p90, l.p99, l.max);
-        println!("traffic   {} frames, {} bytes; per viewer {}..{} frames; {} resyncs", report.frames, report.bytes, report.frames_per_viewer[0], report.frames_per_viewer[1], report.resyncs);
+        println!(
+            "viewers   {} asked, {} connected, {} failed {:?}",
+            report.clients, report.connected, report.failed, report.failures
+        );
+        println!(
+            "connect   p50 {:.1} ms, p99 {:.1} ms; first frame p50 {:.1} ms, p99 {:.1} ms",
+            report.connect_ms.p50,
+            report.connect_ms.p99,
+            report.first_frame_ms.p50,
+            report.first_frame_ms.p99
+        );
+        println!(
+            "latency   p50 {:.1} ms, p90 {:.1} ms, p99 {:.1} ms, max {:.1} ms",
+            l.p50, l.p90, l.p99, l.max
+        );
+        println!(
+            "traffic   {} frames, {} bytes; per viewer {}..{} frames; {} resyncs",
+            report.frames,
+            report.bytes,
+            report.frames_per_viewer[0],
+            report.frames_per_viewer[1],
+            report.resyncs
+        );
         if !report.edit_to_last_viewer_ms.is_empty() {
             let e = &report.edit_to_last_viewer_ms;
             let mut sorted = e.clone();
             sorted.sort_by(f64::total_cmp);
-            println!("edits     {} edits, PUT to last viewer: median {:.1} ms, max {:.1} ms", e.len(), sorted[sorted.len() / 2], sorted[sorted.len() - 1]);
+            println!(
+                "edits     {} edits, PUT to last viewer: median {:.1} ms, max {:.1} ms",
+                e.len(),
+                sorted[sorted.len() / 2],
+                sorted[sorted.len() - 1]
+            );
         }
         if let Some(cpu) = report.load_tester_cpu_percent {
             println!("tester    {cpu:.0}% CPU (of one core) in this process");
         }
-        for (name, value) in report.server.iter().filter(|(n, _)| !n.starts_with("radcast_solve")) {
+        for (name, value) in report
+            .server
+            .iter()
+            .filter(|(n, _)| !n.starts_with("radcast_solve"))
+        {
             println!("server    {name} {value}");
         }
     }
@@ -216,20 +317,28 @@ async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> any
     };
     let mut geometry = match &out_dir {
         Some(dir) => {
-            std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("{}: cannot create", dir.display()))?;
             Some(fetch().await??)
         }
         None => None,
     };
-    let (mut socket, _) = tokio_tungstenite::connect_async(url).await.with_context(|| format!("connecting to {url}"))?;
+    let (mut socket, _) = tokio_tungstenite::connect_async(url)
+        .await
+        .with_context(|| format!("connecting to {url}"))?;
     let mut buffer = PatchBuffer::default();
     let mut seen = 0u64;
     while let Some(message) = socket.next().await {
-        let Message::Binary(data) = message? else { continue };
+        let Message::Binary(data) = message? else {
+            continue;
+        };
         let message = ServerMessage::decode(&data)?;
         let (changed, sent_at) = match &message {
             ServerMessage::Hello(hello) => {
-                println!("hello: scene {:016x}, {} patches, protocol {}", hello.scene_id, hello.patch_count, hello.protocol_version);
+                println!(
+                    "hello: scene {:016x}, {} patches, protocol {}",
+                    hello.scene_id, hello.patch_count, hello.protocol_version
+                );
                 continue;
             }
             ServerMessage::GeometryChanged { geometry_version } => {
@@ -240,18 +349,30 @@ async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> any
                 continue;
             }
             ServerMessage::Full(frame) => {
-                let changed = if buffer.colours.len() == frame.colours.len() { wire::changes(&buffer.colours, &frame.colours).0.len() } else { frame.colours.len() };
+                let changed = if buffer.colours.len() == frame.colours.len() {
+                    wire::changes(&buffer.colours, &frame.colours).0.len()
+                } else {
+                    frame.colours.len()
+                };
                 (changed, frame.info.sent_at_unix_micros)
             }
             ServerMessage::Delta(frame) => (frame.indices.len(), frame.info.sent_at_unix_micros),
         };
         if buffer.apply(&message).is_err() {
-            socket.send(Message::Binary(ClientMessage::RequestFull.encode().into())).await?;
+            socket
+                .send(Message::Binary(ClientMessage::RequestFull.encode().into()))
+                .await?;
             continue;
         }
         let info = buffer.info.context("a frame was applied")?;
-        let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?.as_micros() as u64;
-        let kind = if matches!(message, ServerMessage::Full(_)) { "full" } else { "delta" };
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)?
+            .as_micros() as u64;
+        let kind = if matches!(message, ServerMessage::Full(_)) {
+            "full"
+        } else {
+            "delta"
+        };
         println!(
             "version {}: {kind}, {changed} patches changed, {} bytes, latency {:.1} ms{}",
             info.solution_version,
@@ -272,20 +393,33 @@ async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> any
     Ok(())
 }
 
-async fn view(url: String, out: PathBuf, cameras: Vec<View>, width: u32, height: u32, clients: usize, timeout: f64) -> anyhow::Result<()> {
+async fn view(
+    url: String,
+    out: PathBuf,
+    cameras: Vec<View>,
+    width: u32,
+    height: u32,
+    clients: usize,
+    timeout: f64,
+) -> anyhow::Result<()> {
     if clients == 0 || width == 0 || height == 0 {
         bail!("--clients, --width and --height must be at least 1");
     }
-    let limit = Duration::try_from_secs_f64(timeout).context("--timeout must be a positive number of seconds")?;
+    let limit = Duration::try_from_secs_f64(timeout)
+        .context("--timeout must be a positive number of seconds")?;
     let base = http_base(&url)?;
     let geometry = {
         let base = base.clone();
         tokio::task::spawn_blocking(move || fetch_geometry(&base)).await??
     };
-    let viewers: Vec<_> = (0..clients).map(|_| tokio::spawn({
-        let url = url.clone();
-        async move { watch_until_final(&url, limit).await }
-    })).collect();
+    let viewers: Vec<_> = (0..clients)
+        .map(|_| {
+            tokio::spawn({
+                let url = url.clone();
+                async move { watch_until_final(&url, limit).await }
+            })
+        })
+        .collect();
     let mut outcomes: Vec<ViewerOutcome> = Vec::with_capacity(clients);
     for viewer in viewers {
         outcomes.push(viewer.await??);
@@ -294,16 +428,30 @@ async fn view(url: String, out: PathBuf, cameras: Vec<View>, width: u32, height:
         let base = base.clone();
         tokio::task::spawn_blocking(move || fetch_solution(&base)).await??
     };
-    let expected = solution["checksum"].as_u64().context("/api/solution has no checksum")? as u32;
-    let cameras = if cameras.is_empty() { vec![View::for_scene(&geometry)] } else { cameras };
+    let expected = solution["checksum"]
+        .as_u64()
+        .context("/api/solution has no checksum")? as u32;
+    let cameras = if cameras.is_empty() {
+        vec![View::for_scene(&geometry)]
+    } else {
+        cameras
+    };
     let mut mismatched = 0;
     for (v, outcome) in outcomes.iter().enumerate() {
         if outcome.buffer.colours.len() != geometry.patches.len() {
-            bail!("viewer {v}: {} patches, but the geometry has {}", outcome.buffer.colours.len(), geometry.patches.len());
+            bail!(
+                "viewer {v}: {} patches, but the geometry has {}",
+                outcome.buffer.colours.len(),
+                geometry.patches.len()
+            );
         }
         let checksum = wire::checksum(&outcome.buffer.colours);
         let version = outcome.buffer.info.map_or(0, |i| i.solution_version);
-        let status = if checksum == expected { "ok" } else { "MISMATCH" };
+        let status = if checksum == expected {
+            "ok"
+        } else {
+            "MISMATCH"
+        };
         mismatched += usize::from(checksum != expected);
         println!(
             "viewer {v}: version {version}, {} frames, {} bytes, first frame after {:.1} ms, checksum {checksum:08x} {status}",
@@ -318,7 +466,9 @@ async fn view(url: String, out: PathBuf, cameras: Vec<View>, width: u32, height:
         }
     }
     if mismatched > 0 {
-        bail!("{mismatched} of {clients} viewers do not match the server's checksum {expected:08x}");
+        bail!(
+            "{mismatched} of {clients} viewers do not match the server's checksum {expected:08x}"
+        );
     }
     Ok(())
 }

@@ -25,14 +25,32 @@ impl View {
     pub fn parse(text: &str) -> anyhow::Result<View> {
         let numbers: Vec<f32> = text
             .split(',')
-            .map(|s| s.trim().parse::<f32>().ok().filter(|x| x.is_finite()).with_context(|| format!("camera '{text}': '{s}' is not a finite number")))
+            .map(|s| {
+                s.trim()
+                    .parse::<f32>()
+                    .ok()
+                    .filter(|x| x.is_finite())
+                    .with_context(|| format!("camera '{text}': '{s}' is not a finite number"))
+            })
             .collect::<Result<_, _>>()?;
         let [ex, ey, ez, tx, ty, tz, ux, uy, uz, fov] = numbers[..] else {
-            bail!("camera '{text}' needs 10 numbers: eye x,y,z, target x,y,z, up x,y,z, fov degrees");
+            bail!(
+                "camera '{text}' needs 10 numbers: eye x,y,z, target x,y,z, up x,y,z, fov degrees"
+            );
         };
-        let view = View { eye: Vec3::new(ex, ey, ez), target: Vec3::new(tx, ty, tz), up: Vec3::new(ux, uy, uz), vertical_fov_degrees: fov };
-        if view.eye == view.target || view.up.cross(view.target - view.eye) == Vec3::ZERO || !(fov > 0.0 && fov < 180.0) {
-            bail!("camera '{text}': eye must differ from target, up must not be parallel to the view, fov must be in (0, 180)");
+        let view = View {
+            eye: Vec3::new(ex, ey, ez),
+            target: Vec3::new(tx, ty, tz),
+            up: Vec3::new(ux, uy, uz),
+            vertical_fov_degrees: fov,
+        };
+        if view.eye == view.target
+            || view.up.cross(view.target - view.eye) == Vec3::ZERO
+            || !(fov > 0.0 && fov < 180.0)
+        {
+            bail!(
+                "camera '{text}': eye must differ from target, up must not be parallel to the view, fov must be in (0, 180)"
+            );
         }
         Ok(view)
     }
@@ -40,15 +58,29 @@ impl View {
     /// The scene's own suggested view, or one that frames its bounding box from -z.
     pub fn for_scene(geometry: &Geometry) -> View {
         if let Some(c) = geometry.camera {
-            return View { eye: c.eye.into(), target: c.target.into(), up: c.up.into(), vertical_fov_degrees: c.vertical_fov_degrees };
+            return View {
+                eye: c.eye.into(),
+                target: c.target.into(),
+                up: c.up.into(),
+                vertical_fov_degrees: c.vertical_fov_degrees,
+            };
         }
-        let (lo, hi) = geometry.positions.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), p| {
-            (lo.min(Vec3::from(*p)), hi.max(Vec3::from(*p)))
-        });
-        let (centre, radius) = ((lo + hi) * 0.5, ((hi - lo).length() * 0.5).max(f32::MIN_POSITIVE));
+        let (lo, hi) = geometry.positions.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), p| (lo.min(Vec3::from(*p)), hi.max(Vec3::from(*p))),
+        );
+        let (centre, radius) = (
+            (lo + hi) * 0.5,
+            ((hi - lo).length() * 0.5).max(f32::MIN_POSITIVE),
+        );
         let fov: f32 = 45.0;
         let distance = 1.1 * radius / (fov.to_radians() * 0.5).sin();
-        View { eye: centre - Vec3::Z * distance, target: centre, up: Vec3::Y, vertical_fov_degrees: fov }
+        View {
+            eye: centre - Vec3::Z * distance,
+            target: centre,
+            up: Vec3::Y,
+            vertical_fov_degrees: fov,
+        }
     }
 }
 
@@ -72,18 +104,31 @@ impl Image {
 
     /// Writes a PNG.
     pub fn write_png(&self, path: &Path) -> anyhow::Result<()> {
-        let file = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
+        let file = std::fs::File::create(path)
+            .with_context(|| format!("{}: cannot create", path.display()))?;
         let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), self.width, self.height);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
-        encoder.write_header()?.write_image_data(&self.rgb).with_context(|| format!("{}: writing PNG", path.display()))
+        encoder
+            .write_header()?
+            .write_image_data(&self.rgb)
+            .with_context(|| format!("{}: writing PNG", path.display()))
     }
 }
 
 /// Renders the patches from `view`; both sides of every face are drawn.
-pub fn render(geometry: &Geometry, buffer: &PatchBuffer, view: &View, width: u32, height: u32) -> Image {
+pub fn render(
+    geometry: &Geometry,
+    buffer: &PatchBuffer,
+    view: &View,
+    width: u32,
+    height: u32,
+) -> Image {
     let radiosity = buffer.radiosity();
-    let colours: Vec<Vec3> = corner_radiosity(geometry, &radiosity).into_iter().map(Vec3::from).collect();
+    let colours: Vec<Vec3> = corner_radiosity(geometry, &radiosity)
+        .into_iter()
+        .map(Vec3::from)
+        .collect();
     let k = exposure(geometry, &radiosity);
     let camera = Camera::new(view, geometry, width, height);
     let mut inverse_depth = vec![0.0f32; (width * height) as usize];
@@ -91,14 +136,26 @@ pub fn render(geometry: &Geometry, buffer: &PatchBuffer, view: &View, width: u32
     for patch in &geometry.patches {
         let c = corners(patch);
         for k in 1..c.len() - 1 {
-            let triangle = [c[0], c[k], c[k + 1]].map(|i| (camera.to_camera(Vec3::from(geometry.positions[i as usize])), colours[i as usize]));
+            let triangle = [c[0], c[k], c[k + 1]].map(|i| {
+                (
+                    camera.to_camera(Vec3::from(geometry.positions[i as usize])),
+                    colours[i as usize],
+                )
+            });
             let polygon = clip_near(&triangle, camera.near);
             for j in 1..polygon.len().saturating_sub(1) {
-                camera.raster(&[polygon[0], polygon[j], polygon[j + 1]], &mut inverse_depth, &mut linear);
+                camera.raster(
+                    &[polygon[0], polygon[j], polygon[j + 1]],
+                    &mut inverse_depth,
+                    &mut linear,
+                );
             }
         }
     }
-    let rgb = linear.iter().flat_map(|c| tone_map(c.to_array(), k).map(srgb_byte)).collect();
+    let rgb = linear
+        .iter()
+        .flat_map(|c| tone_map(c.to_array(), k).map(srgb_byte))
+        .collect();
     Image { width, height, rgb }
 }
 
@@ -120,13 +177,18 @@ impl Camera {
         let forward = (view.target - view.eye).normalize();
         let right = forward.cross(view.up).normalize();
         let up = right.cross(forward);
-        let extent = geometry.positions.iter().map(|p| (Vec3::from(*p) - view.eye).length()).fold(0.0, f32::max);
+        let extent = geometry
+            .positions
+            .iter()
+            .map(|p| (Vec3::from(*p) - view.eye).length())
+            .fold(0.0, f32::max);
         Camera {
             eye: view.eye,
             right,
             up,
             forward,
-            focal_pixels: 0.5 * height as f32 / (0.5 * view.vertical_fov_degrees.to_radians()).tan(),
+            focal_pixels: 0.5 * height as f32
+                / (0.5 * view.vertical_fov_degrees.to_radians()).tan(),
             near: (extent * 1e-4).max(f32::MIN_POSITIVE),
             width,
             height,
@@ -143,21 +205,38 @@ impl Camera {
     /// keeping the nearest surface per pixel.
     fn raster(&self, triangle: &[(Vec3, Vec3); 3], inverse_depth: &mut [f32], linear: &mut [Vec3]) {
         let (w, h) = (self.width as f32, self.height as f32);
-        let screen = triangle.map(|(p, _)| Vec3::new(0.5 * w + self.focal_pixels * p.x / p.z, 0.5 * h - self.focal_pixels * p.y / p.z, 1.0 / p.z));
-        let edge = |a: Vec3, b: Vec3, x: f32, y: f32| (b.x - a.x) * (y - a.y) - (b.y - a.y) * (x - a.x);
+        let screen = triangle.map(|(p, _)| {
+            Vec3::new(
+                0.5 * w + self.focal_pixels * p.x / p.z,
+                0.5 * h - self.focal_pixels * p.y / p.z,
+                1.0 / p.z,
+            )
+        });
+        let edge =
+            |a: Vec3, b: Vec3, x: f32, y: f32| (b.x - a.x) * (y - a.y) - (b.y - a.y) * (x - a.x);
         let area = edge(screen[0], screen[1], screen[2].x, screen[2].y);
         if area == 0.0 || !area.is_finite() {
             return;
         }
-        let bound = |f: fn(f32, f32) -> f32, start: f32, axis: fn(&Vec3) -> f32| screen.iter().map(axis).fold(start, f);
+        let bound = |f: fn(f32, f32) -> f32, start: f32, axis: fn(&Vec3) -> f32| {
+            screen.iter().map(axis).fold(start, f)
+        };
         let min_x = bound(f32::min, f32::INFINITY, |p| p.x).floor().max(0.0) as u32;
-        let max_x = bound(f32::max, f32::NEG_INFINITY, |p| p.x).ceil().clamp(0.0, w) as u32;
+        let max_x = bound(f32::max, f32::NEG_INFINITY, |p| p.x)
+            .ceil()
+            .clamp(0.0, w) as u32;
         let min_y = bound(f32::min, f32::INFINITY, |p| p.y).floor().max(0.0) as u32;
-        let max_y = bound(f32::max, f32::NEG_INFINITY, |p| p.y).ceil().clamp(0.0, h) as u32;
+        let max_y = bound(f32::max, f32::NEG_INFINITY, |p| p.y)
+            .ceil()
+            .clamp(0.0, h) as u32;
         for y in min_y..max_y {
             for x in min_x..max_x {
                 let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-                let b = [edge(screen[1], screen[2], px, py) / area, edge(screen[2], screen[0], px, py) / area, edge(screen[0], screen[1], px, py) / area];
+                let b = [
+                    edge(screen[1], screen[2], px, py) / area,
+                    edge(screen[2], screen[0], px, py) / area,
+                    edge(screen[0], screen[1], px, py) / area,
+                ];
                 if b.iter().any(|&v| v < 0.0) {
                     continue;
                 }
@@ -169,7 +248,10 @@ impl Camera {
                     continue;
                 }
                 inverse_depth[index] = inverse;
-                linear[index] = (triangle[0].1 * weights[0] + triangle[1].1 * weights[1] + triangle[2].1 * weights[2]) / inverse;
+                linear[index] = (triangle[0].1 * weights[0]
+                    + triangle[1].1 * weights[1]
+                    + triangle[2].1 * weights[2])
+                    / inverse;
             }
         }
     }

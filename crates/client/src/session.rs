@@ -7,7 +7,8 @@ use tokio_tungstenite::tungstenite::Message;
 use wire::{ApplyError, ClientMessage, Hello, PatchBuffer, ServerMessage};
 
 /// A viewer's WebSocket.
-pub type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+pub type Socket =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
 /// What a viewer ended with.
 #[derive(Debug)]
@@ -26,12 +27,16 @@ pub struct ViewerOutcome {
 
 /// Connects to `url` and applies frames until one is final, or fails after `limit`.
 pub async fn watch_until_final(url: &str, limit: Duration) -> anyhow::Result<ViewerOutcome> {
-    tokio::time::timeout(limit, run(url)).await.with_context(|| format!("{url}: no final frame within {limit:?}"))?
+    tokio::time::timeout(limit, run(url))
+        .await
+        .with_context(|| format!("{url}: no final frame within {limit:?}"))?
 }
 
 async fn run(url: &str) -> anyhow::Result<ViewerOutcome> {
     let start = Instant::now();
-    let (mut socket, _) = tokio_tungstenite::connect_async(url).await.with_context(|| format!("connecting to {url}"))?;
+    let (mut socket, _) = tokio_tungstenite::connect_async(url)
+        .await
+        .with_context(|| format!("connecting to {url}"))?;
     let mut hello = None;
     let mut buffer = PatchBuffer::default();
     let (mut frames, mut bytes, mut first_frame) = (0u64, 0u64, None);
@@ -41,7 +46,8 @@ async fn run(url: &str) -> anyhow::Result<ViewerOutcome> {
             Message::Close(frame) => bail!("{url}: server closed the connection: {frame:?}"),
             _ => continue,
         };
-        let message = ServerMessage::decode(&data).with_context(|| format!("{url}: bad message from the server"))?;
+        let message = ServerMessage::decode(&data)
+            .with_context(|| format!("{url}: bad message from the server"))?;
         match (&message, hello) {
             // Colours stay valid across a geometry change; a renderer refetches the geometry.
             (ServerMessage::GeometryChanged { .. }, _) => continue,
@@ -54,17 +60,29 @@ async fn run(url: &str) -> anyhow::Result<ViewerOutcome> {
                 match buffer.apply(&message) {
                     Ok(()) => {}
                     Err(ApplyError::BaseMismatch { .. }) => {
-                        socket.send(Message::Binary(ClientMessage::RequestFull.encode().into())).await?;
+                        socket
+                            .send(Message::Binary(ClientMessage::RequestFull.encode().into()))
+                            .await?;
                         continue;
                     }
                 }
                 if buffer.colours.len() != h.patch_count as usize {
-                    bail!("{url}: frame has {} patches, hello said {}", buffer.colours.len(), h.patch_count);
+                    bail!(
+                        "{url}: frame has {} patches, hello said {}",
+                        buffer.colours.len(),
+                        h.patch_count
+                    );
                 }
                 first_frame.get_or_insert_with(|| start.elapsed());
                 if buffer.info.is_some_and(|i| i.is_final) {
                     let _ = socket.close(None).await;
-                    return Ok(ViewerOutcome { hello: h, buffer, frames, bytes, first_frame: first_frame.unwrap_or_default() });
+                    return Ok(ViewerOutcome {
+                        hello: h,
+                        buffer,
+                        frames,
+                        bytes,
+                        first_frame: first_frame.unwrap_or_default(),
+                    });
                 }
             }
         }

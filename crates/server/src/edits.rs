@@ -43,7 +43,11 @@ impl Edits {
     /// Adds a translation of `object` to any not yet applied.
     pub fn translate(&self, object: &str, offset: [f64; 3]) {
         let mut pending = self.pending.lock().expect("edits lock");
-        let total = pending.batch.moves.entry(object.to_string()).or_insert([0.0; 3]);
+        let total = pending
+            .batch
+            .moves
+            .entry(object.to_string())
+            .or_insert([0.0; 3]);
         (0..3).for_each(|k| total[k] += offset[k]);
         self.wake.notify_one();
     }

@@ -45,8 +45,18 @@ pub struct GeometryState {
 
 impl GeometryState {
     fn new(scene_id: u64, version: u64, geometry: Geometry) -> GeometryState {
-        let hello = Hello { protocol_version: PROTOCOL_VERSION, scene_id, geometry_version: version, patch_count: geometry.patches.len() as u32 };
-        GeometryState { version, hello: ServerMessage::Hello(hello).encode().into(), encoded: geometry.encode().into(), model: Arc::new(geometry) }
+        let hello = Hello {
+            protocol_version: PROTOCOL_VERSION,
+            scene_id,
+            geometry_version: version,
+            patch_count: geometry.patches.len() as u32,
+        };
+        GeometryState {
+            version,
+            hello: ServerMessage::Hello(hello).encode().into(),
+            encoded: geometry.encode().into(),
+            model: Arc::new(geometry),
+        }
     }
 }
 
@@ -61,7 +71,9 @@ pub struct Hub {
 }
 
 fn now_micros() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_micros() as u64)
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64)
 }
 
 /// Headroom a frame may leave unused before the scale is lowered: 2^8. Keeping the previous
@@ -70,10 +82,26 @@ fn now_micros() -> u64 {
 const SCALE_HEADROOM: f32 = 256.0;
 
 fn encode(radiosity: &[[f32; 3]], previous_scale: Option<f32>) -> (f32, Vec<u32>) {
-    let brightest = radiosity.iter().flatten().copied().filter(|c| c.is_finite()).fold(0.0, f32::max);
-    let fits = |scale: f32| brightest <= wire::rgb9e5::MAX_VALUE * scale && brightest * SCALE_HEADROOM >= wire::rgb9e5::MAX_VALUE * scale;
-    let scale = previous_scale.filter(|s| fits(*s)).unwrap_or_else(|| wire::scale_for(brightest));
-    (scale, radiosity.iter().map(|rgb| wire::encode_colour(*rgb, scale)).collect())
+    let brightest = radiosity
+        .iter()
+        .flatten()
+        .copied()
+        .filter(|c| c.is_finite())
+        .fold(0.0, f32::max);
+    let fits = |scale: f32| {
+        brightest <= wire::rgb9e5::MAX_VALUE * scale
+            && brightest * SCALE_HEADROOM >= wire::rgb9e5::MAX_VALUE * scale
+    };
+    let scale = previous_scale
+        .filter(|s| fits(*s))
+        .unwrap_or_else(|| wire::scale_for(brightest));
+    (
+        scale,
+        radiosity
+            .iter()
+            .map(|rgb| wire::encode_colour(*rgb, scale))
+            .collect(),
+    )
 }
 
 impl Hub {
@@ -84,7 +112,11 @@ impl Hub {
         let first = Self::frames(1, false, scale, colours, None, 1);
         Hub {
             sender: watch::Sender::new(Arc::new(first)),
-            geometry: std::sync::RwLock::new(Arc::new(GeometryState::new(scene_id, 1, geometry.clone()))),
+            geometry: std::sync::RwLock::new(Arc::new(GeometryState::new(
+                scene_id,
+                1,
+                geometry.clone(),
+            ))),
             scene_id,
             patch_count,
         }
@@ -104,16 +136,51 @@ impl Hub {
         version
     }
 
-    fn frames(version: u64, is_final: bool, scale: f32, colours: Vec<u32>, previous: Option<&Published>, geometry_version: u64) -> Published {
-        let info = FrameInfo { solution_version: version, sent_at_unix_micros: now_micros(), scale, patch_count: colours.len() as u32, is_final };
+    fn frames(
+        version: u64,
+        is_final: bool,
+        scale: f32,
+        colours: Vec<u32>,
+        previous: Option<&Published>,
+        geometry_version: u64,
+    ) -> Published {
+        let info = FrameInfo {
+            solution_version: version,
+            sent_at_unix_micros: now_micros(),
+            scale,
+            patch_count: colours.len() as u32,
+            is_final,
+        };
         // A delta needs the same scale and the same patches (a hierarchy's leaves change on a move).
-        let delta = previous.filter(|p| p.scale == scale && p.colours.len() == colours.len()).map(|p| {
-            let (indices, changed) = wire::changes(&p.colours, &colours);
-            let frame = DeltaFrame { base_version: p.version, info, indices, colours: changed };
-            (p.version, Bytes::from(ServerMessage::Delta(frame).encode()))
-        });
-        let full = Bytes::from(ServerMessage::Full(FullFrame { info, colours: colours.clone() }).encode());
-        Published { version, is_final, checksum: wire::checksum(&colours), colours: Arc::new(colours), scale, full, delta, geometry_version }
+        let delta = previous
+            .filter(|p| p.scale == scale && p.colours.len() == colours.len())
+            .map(|p| {
+                let (indices, changed) = wire::changes(&p.colours, &colours);
+                let frame = DeltaFrame {
+                    base_version: p.version,
+                    info,
+                    indices,
+                    colours: changed,
+                };
+                (p.version, Bytes::from(ServerMessage::Delta(frame).encode()))
+            });
+        let full = Bytes::from(
+            ServerMessage::Full(FullFrame {
+                info,
+                colours: colours.clone(),
+            })
+            .encode(),
+        );
+        Published {
+            version,
+            is_final,
+            checksum: wire::checksum(&colours),
+            colours: Arc::new(colours),
+            scale,
+            full,
+            delta,
+            geometry_version,
+        }
     }
 
     /// Publishes a new state (radiosity in W/m^2) unless it encodes to what viewers already
@@ -122,10 +189,21 @@ impl Hub {
         let previous = self.current();
         let geometry_version = self.geometry().version;
         let (scale, colours) = encode(radiosity, Some(previous.scale));
-        if previous.scale == scale && *previous.colours == colours && previous.is_final == is_final && previous.geometry_version == geometry_version {
+        if previous.scale == scale
+            && *previous.colours == colours
+            && previous.is_final == is_final
+            && previous.geometry_version == geometry_version
+        {
             return previous.version;
         }
-        let next = Self::frames(previous.version + 1, is_final, scale, colours, Some(&previous), geometry_version);
+        let next = Self::frames(
+            previous.version + 1,
+            is_final,
+            scale,
+            colours,
+            Some(&previous),
+            geometry_version,
+        );
         let version = next.version;
         self.sender.send_replace(Arc::new(next));
         version

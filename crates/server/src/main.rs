@@ -4,7 +4,9 @@ use anyhow::Context;
 use clap::Parser;
 use server::solving::{emitters, prepare, serve_edits, shared_for, solve_and_publish};
 use server::{Limits, routes};
-use solver::{FormFactorSettings, HierarchySettings, MethodChoice, PatchTarget, SolveRequest, SolverSettings};
+use solver::{
+    FormFactorSettings, HierarchySettings, MethodChoice, PatchTarget, SolveRequest, SolverSettings,
+};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -63,31 +65,58 @@ struct Args {
 /// 128 random bits as hex, from the operating system.
 fn random_token() -> anyhow::Result<String> {
     let mut bytes = [0u8; 16];
-    getrandom::fill(&mut bytes).map_err(|e| anyhow::anyhow!("no randomness for the control token: {e}"))?;
+    getrandom::fill(&mut bytes)
+        .map_err(|e| anyhow::anyhow!("no randomness for the control token: {e}"))?;
     Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
 }
 
 fn seconds(value: f64, flag: &str) -> anyhow::Result<Duration> {
-    Duration::try_from_secs_f64(value).ok().filter(|d| !d.is_zero()).with_context(|| format!("--{flag} must be a positive number of seconds, got {value}"))
+    Duration::try_from_secs_f64(value)
+        .ok()
+        .filter(|d| !d.is_zero())
+        .with_context(|| format!("--{flag} must be a positive number of seconds, got {value}"))
 }
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt().with_writer(std::io::stderr).with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into())).init();
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .init();
     let args = Args::parse();
     // One descriptor per viewer: take the hard limit.
     let _ = rlimit::increase_nofile_limit(u64::MAX);
     anyhow::ensure!(args.patches > 0, "--patches must be at least 1");
-    anyhow::ensure!(args.tolerance > 0.0 && args.tolerance < 1.0, "--tolerance must be in (0, 1), got {}", args.tolerance);
-    anyhow::ensure!(args.error > 0.0 && args.error < 1.0, "--error must be in (0, 1), got {}", args.error);
+    anyhow::ensure!(
+        args.tolerance > 0.0 && args.tolerance < 1.0,
+        "--tolerance must be in (0, 1), got {}",
+        args.tolerance
+    );
+    anyhow::ensure!(
+        args.error > 0.0 && args.error < 1.0,
+        "--error must be in (0, 1), got {}",
+        args.error
+    );
     anyhow::ensure!(args.max_leaves > 0, "--max-leaves must be at least 1");
     let request = SolveRequest {
         patches: PatchTarget::Count(args.patches),
         form_factors: FormFactorSettings::default(),
-        solver: SolverSettings { tolerance: args.tolerance, ..SolverSettings::default() },
+        solver: SolverSettings {
+            tolerance: args.tolerance,
+            ..SolverSettings::default()
+        },
         ..SolveRequest::default()
     }
-    .with_method(args.method, HierarchySettings { error: args.error, max_leaves: args.max_leaves, ..HierarchySettings::default() });
+    .with_method(
+        args.method,
+        HierarchySettings {
+            error: args.error,
+            max_leaves: args.max_leaves,
+            ..HierarchySettings::default()
+        },
+    );
     let limits = Limits {
         max_viewers: args.max_viewers,
         max_viewers_per_ip: args.max_viewers_per_ip,
@@ -102,7 +131,9 @@ async fn main() -> anyhow::Result<()> {
         None => random_token()?,
     };
     let shared = shared_for(&prepared, limits, token.clone());
-    let listener = tokio::net::TcpListener::bind(&args.addr).await.with_context(|| format!("cannot listen on {}", args.addr))?;
+    let listener = tokio::net::TcpListener::bind(&args.addr)
+        .await
+        .with_context(|| format!("cannot listen on {}", args.addr))?;
     let address = listener.local_addr()?;
     println!(
         "radcast-server: {} ({} patches) on http://{address}\n  viewers: radcast-client view --url ws://{address}/ws --out view.png\n  control: curl -X PUT -H 'Authorization: Bearer {token}' -d '{{\"emission\": [17, 12, 4]}}' http://{address}/api/objects/NAME/emission",
@@ -117,7 +148,8 @@ async fn main() -> anyhow::Result<()> {
     let solving = {
         let shared = shared.clone();
         tokio::task::spawn_blocking(move || {
-            let served = solve_and_publish(&prepared, &shared, cache_dir.as_deref()).and_then(|solution| serve_edits(&prepared, &shared, solution));
+            let served = solve_and_publish(&prepared, &shared, cache_dir.as_deref())
+                .and_then(|solution| serve_edits(&prepared, &shared, solution));
             if let Err(error) = served {
                 tracing::error!("solve failed: {error:#}");
             }

@@ -77,20 +77,97 @@ impl Metrics {
         };
         let plain = |v: u64| vec![(String::new(), v as f64)];
         let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
-        metric("radcast_viewers", "gauge", "Viewers connected now.", &plain(get(&self.viewers)));
-        let refused = vec![("{limit=\"server\"}".to_string(), get(&self.refused) as f64), ("{limit=\"per_ip\"}".to_string(), get(&self.refused_per_ip) as f64)];
-        metric("radcast_viewers_refused_total", "counter", "Connections refused at a viewer limit.", &refused);
-        let dropped: Vec<_> = DropReason::ALL.iter().map(|r| (format!("{{reason=\"{}\"}}", r.label()), self.dropped_count(*r) as f64)).collect();
-        metric("radcast_viewers_dropped_total", "counter", "Viewers disconnected by the server, by reason.", &dropped);
-        metric("radcast_frames_sent_total", "counter", "Frames sent to viewers.", &plain(get(&self.frames_sent)));
-        metric("radcast_bytes_sent_total", "counter", "Frame bytes sent to viewers.", &plain(get(&self.bytes_sent)));
-        metric("radcast_versions_skipped_total", "counter", "Solution versions a slow viewer skipped.", &plain(get(&self.versions_skipped)));
-        metric("radcast_full_resyncs_total", "counter", "Full frames sent where a delta did not apply.", &plain(get(&self.full_resyncs)));
-        metric("radcast_patches", "gauge", "Patches per frame.", &plain(patches as u64));
-        metric("radcast_solution_version", "gauge", "Current solution version.", &plain(solution_version));
-        metric("radcast_solution_final", "gauge", "1 once the solver converged.", &plain(is_final as u64));
-        let stages: Vec<_> = self.solve_seconds.lock().map(|s| s.iter().map(|(stage, v)| (format!("{{stage=\"{stage}\"}}"), *v)).collect()).unwrap_or_default();
-        metric("radcast_solve_seconds", "gauge", "Seconds per solve stage.", &stages);
+        metric(
+            "radcast_viewers",
+            "gauge",
+            "Viewers connected now.",
+            &plain(get(&self.viewers)),
+        );
+        let refused = vec![
+            ("{limit=\"server\"}".to_string(), get(&self.refused) as f64),
+            (
+                "{limit=\"per_ip\"}".to_string(),
+                get(&self.refused_per_ip) as f64,
+            ),
+        ];
+        metric(
+            "radcast_viewers_refused_total",
+            "counter",
+            "Connections refused at a viewer limit.",
+            &refused,
+        );
+        let dropped: Vec<_> = DropReason::ALL
+            .iter()
+            .map(|r| {
+                (
+                    format!("{{reason=\"{}\"}}", r.label()),
+                    self.dropped_count(*r) as f64,
+                )
+            })
+            .collect();
+        metric(
+            "radcast_viewers_dropped_total",
+            "counter",
+            "Viewers disconnected by the server, by reason.",
+            &dropped,
+        );
+        metric(
+            "radcast_frames_sent_total",
+            "counter",
+            "Frames sent to viewers.",
+            &plain(get(&self.frames_sent)),
+        );
+        metric(
+            "radcast_bytes_sent_total",
+            "counter",
+            "Frame bytes sent to viewers.",
+            &plain(get(&self.bytes_sent)),
+        );
+        metric(
+            "radcast_versions_skipped_total",
+            "counter",
+            "Solution versions a slow viewer skipped.",
+            &plain(get(&self.versions_skipped)),
+        );
+        metric(
+            "radcast_full_resyncs_total",
+            "counter",
+            "Full frames sent where a delta did not apply.",
+            &plain(get(&self.full_resyncs)),
+        );
+        metric(
+            "radcast_patches",
+            "gauge",
+            "Patches per frame.",
+            &plain(patches as u64),
+        );
+        metric(
+            "radcast_solution_version",
+            "gauge",
+            "Current solution version.",
+            &plain(solution_version),
+        );
+        metric(
+            "radcast_solution_final",
+            "gauge",
+            "1 once the solver converged.",
+            &plain(is_final as u64),
+        );
+        let stages: Vec<_> = self
+            .solve_seconds
+            .lock()
+            .map(|s| {
+                s.iter()
+                    .map(|(stage, v)| (format!("{{stage=\"{stage}\"}}"), *v))
+                    .collect()
+            })
+            .unwrap_or_default();
+        metric(
+            "radcast_solve_seconds",
+            "gauge",
+            "Seconds per solve stage.",
+            &stages,
+        );
         out
     }
 }

@@ -2,17 +2,17 @@
 
 use crate::Shared;
 use crate::viewer::{Refusal, serve_viewer, try_admit};
-use axum::extract::ConnectInfo;
-use std::net::SocketAddr;
 use axum::Router;
+use axum::extract::ConnectInfo;
+use axum::extract::Path;
 use axum::extract::State;
 use axum::extract::ws::WebSocketUpgrade;
+use axum::http::HeaderMap;
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use axum::extract::Path;
-use axum::http::HeaderMap;
 use axum::routing::{get, put};
 use serde::Serialize;
+use std::net::SocketAddr;
 use std::sync::Arc;
 
 /// The router: `/healthz`, `/api/scene`, `/api/scene.glb`, `/api/solution`, `/ws`, `/metrics`,
@@ -31,7 +31,11 @@ pub fn router(shared: Arc<Shared>) -> Router {
 }
 
 async fn scene(State(shared): State<Arc<Shared>>) -> Response {
-    ([(header::CONTENT_TYPE, "application/vnd.radcast.geometry")], shared.hub.geometry().encoded.clone()).into_response()
+    (
+        [(header::CONTENT_TYPE, "application/vnd.radcast.geometry")],
+        shared.hub.geometry().encoded.clone(),
+    )
+        .into_response()
 }
 
 /// The current state as binary glTF, decoded from the same codes viewers hold.
@@ -39,7 +43,11 @@ async fn scene_glb(State(shared): State<Arc<Shared>>) -> Response {
     let current = shared.hub.current();
     let geometry = shared.hub.geometry().model.clone();
     let glb = tokio::task::spawn_blocking(move || {
-        let radiosity: Vec<[f32; 3]> = current.colours.iter().map(|&c| wire::decode_colour(c, current.scale)).collect();
+        let radiosity: Vec<[f32; 3]> = current
+            .colours
+            .iter()
+            .map(|&c| wire::decode_colour(c, current.scale))
+            .collect();
         wire::gltf::encode_glb(&geometry, &radiosity)
     })
     .await;
@@ -53,7 +61,12 @@ async fn scene_glb(State(shared): State<Arc<Shared>>) -> Response {
 /// peer address for the per-IP limit).
 pub async fn serve(listener: tokio::net::TcpListener, shared: Arc<Shared>) -> std::io::Result<()> {
     let stop = shared.shutdown.clone();
-    axum::serve(listener, router(shared).into_make_service_with_connect_info::<SocketAddr>()).with_graceful_shutdown(async move { stop.cancelled().await }).await
+    axum::serve(
+        listener,
+        router(shared).into_make_service_with_connect_info::<SocketAddr>(),
+    )
+    .with_graceful_shutdown(async move { stop.cancelled().await })
+    .await
 }
 
 /// The body of `GET /api/solution`.
@@ -95,15 +108,33 @@ async fn solution(State(shared): State<Arc<Shared>>) -> Response {
 
 async fn metrics(State(shared): State<Arc<Shared>>) -> Response {
     let current = shared.hub.current();
-    let text = shared.metrics.render(shared.hub.patch_count, current.version, current.is_final);
+    let text = shared
+        .metrics
+        .render(shared.hub.patch_count, current.version, current.is_final);
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
 }
 
-async fn websocket(State(shared): State<Arc<Shared>>, ConnectInfo(peer): ConnectInfo<SocketAddr>, upgrade: WebSocketUpgrade) -> Response {
+async fn websocket(
+    State(shared): State<Arc<Shared>>,
+    ConnectInfo(peer): ConnectInfo<SocketAddr>,
+    upgrade: WebSocketUpgrade,
+) -> Response {
     let slot = match try_admit(&shared, peer.ip()) {
         Ok(slot) => slot,
-        Err(Refusal::ServerFull) => return (StatusCode::SERVICE_UNAVAILABLE, "radcast-server: viewer limit reached\n").into_response(),
-        Err(Refusal::AddressFull) => return (StatusCode::TOO_MANY_REQUESTS, format!("radcast-server: too many viewers from {}\n", peer.ip())).into_response(),
+        Err(Refusal::ServerFull) => {
+            return (
+                StatusCode::SERVICE_UNAVAILABLE,
+                "radcast-server: viewer limit reached\n",
+            )
+                .into_response();
+        }
+        Err(Refusal::AddressFull) => {
+            return (
+                StatusCode::TOO_MANY_REQUESTS,
+                format!("radcast-server: too many viewers from {}\n", peer.ip()),
+            )
+                .into_response();
+        }
     };
     let limits = shared.limits;
     // Viewers send only tiny control messages and every frame is flushed as it is sent, so
@@ -118,44 +149,93 @@ async fn websocket(State(shared): State<Arc<Shared>>, ConnectInfo(peer): Connect
 
 /// Whether `headers` carry `Authorization: Bearer <token>`, compared in constant time.
 pub fn authorized(headers: &HeaderMap, token: &str) -> bool {
-    let Some(given) = headers.get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()).and_then(|v| v.strip_prefix("Bearer ")) else {
+    let Some(given) = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+    else {
         return false;
     };
-    given.len() == token.len() && given.bytes().zip(token.bytes()).fold(0u8, |acc, (a, b)| acc | (a ^ b)) == 0
+    given.len() == token.len()
+        && given
+            .bytes()
+            .zip(token.bytes())
+            .fold(0u8, |acc, (a, b)| acc | (a ^ b))
+            == 0
 }
 
 fn refuse(status: StatusCode, reason: String) -> Response {
     let mut response = (status, axum::Json(serde_json::json!({ "error": reason }))).into_response();
     if status == StatusCode::UNAUTHORIZED {
-        response.headers_mut().insert(header::WWW_AUTHENTICATE, header::HeaderValue::from_static("Bearer"));
+        response.headers_mut().insert(
+            header::WWW_AUTHENTICATE,
+            header::HeaderValue::from_static("Bearer"),
+        );
     }
     response
 }
 
 /// Checks an edit: the object exists and the body is `{"FIELD": [a, b, c]}` with finite
 /// numbers (and non-negative ones when `non_negative`). Returns the triple or the reason.
-pub fn parse_edit(objects: &[String], name: &str, body: &[u8], field: &str, non_negative: bool) -> Result<[f64; 3], (StatusCode, String)> {
+pub fn parse_edit(
+    objects: &[String],
+    name: &str,
+    body: &[u8],
+    field: &str,
+    non_negative: bool,
+) -> Result<[f64; 3], (StatusCode, String)> {
     if !objects.iter().any(|o| o == name) {
         return Err((StatusCode::NOT_FOUND, format!("no object named '{name}'")));
     }
     let shape = || format!("body must be JSON like {{\"{field}\": [a, b, c]}}");
-    let value: serde_json::Value = serde_json::from_slice(body).map_err(|e| (StatusCode::BAD_REQUEST, format!("{}: {e}", shape())))?;
-    let object = value.as_object().filter(|o| o.len() == 1).ok_or_else(|| (StatusCode::BAD_REQUEST, shape()))?;
-    let triple: [f64; 3] = object.get(field).and_then(|v| serde_json::from_value(v.clone()).ok()).ok_or_else(|| (StatusCode::BAD_REQUEST, shape()))?;
+    let value: serde_json::Value = serde_json::from_slice(body)
+        .map_err(|e| (StatusCode::BAD_REQUEST, format!("{}: {e}", shape())))?;
+    let object = value
+        .as_object()
+        .filter(|o| o.len() == 1)
+        .ok_or_else(|| (StatusCode::BAD_REQUEST, shape()))?;
+    let triple: [f64; 3] = object
+        .get(field)
+        .and_then(|v| serde_json::from_value(v.clone()).ok())
+        .ok_or_else(|| (StatusCode::BAD_REQUEST, shape()))?;
     let allowed = |c: &f64| c.is_finite() && (!non_negative || *c >= 0.0);
     if !triple.iter().all(allowed) {
-        let rule = if non_negative { "finite and >= 0" } else { "finite" };
-        return Err((StatusCode::BAD_REQUEST, format!("{field} {triple:?} must have every value {rule}")));
+        let rule = if non_negative {
+            "finite and >= 0"
+        } else {
+            "finite"
+        };
+        return Err((
+            StatusCode::BAD_REQUEST,
+            format!("{field} {triple:?} must have every value {rule}"),
+        ));
     }
     Ok(triple)
 }
 
 /// The control API: check the token, parse `{"FIELD": [a, b, c]}`, queue the edit.
-fn edit(shared: &Shared, name: &str, headers: &HeaderMap, body: &[u8], field: &str, non_negative: bool, queue: fn(&crate::edits::Edits, &str, [f64; 3])) -> Response {
+fn edit(
+    shared: &Shared,
+    name: &str,
+    headers: &HeaderMap,
+    body: &[u8],
+    field: &str,
+    non_negative: bool,
+    queue: fn(&crate::edits::Edits, &str, [f64; 3]),
+) -> Response {
     if !authorized(headers, &shared.token) {
-        return refuse(StatusCode::UNAUTHORIZED, "missing or wrong bearer token".into());
+        return refuse(
+            StatusCode::UNAUTHORIZED,
+            "missing or wrong bearer token".into(),
+        );
     }
-    match parse_edit(&shared.hub.geometry().model.objects, name, body, field, non_negative) {
+    match parse_edit(
+        &shared.hub.geometry().model.objects,
+        name,
+        body,
+        field,
+        non_negative,
+    ) {
         Ok(value) => {
             queue(&shared.edits, name, value);
             let mut reply = serde_json::json!({ "object": name, "status": "queued" });
@@ -166,10 +246,36 @@ fn edit(shared: &Shared, name: &str, headers: &HeaderMap, body: &[u8], field: &s
     }
 }
 
-async fn set_emission(State(shared): State<Arc<Shared>>, Path(name): Path<String>, headers: HeaderMap, body: axum::body::Bytes) -> Response {
-    edit(&shared, &name, &headers, &body, "emission", true, crate::edits::Edits::set_emission)
+async fn set_emission(
+    State(shared): State<Arc<Shared>>,
+    Path(name): Path<String>,
+    headers: HeaderMap,
+    body: axum::body::Bytes,
+) -> Response {
+    edit(
+        &shared,
+        &name,
+        &headers,
+        &body,
+        "emission",
+        true,
+        crate::edits::Edits::set_emission,
+    )
 }
 
-async fn set_transform(State(shared): State<Arc<Shared>>, Path(name): Path<String>, headers: HeaderMap, body: axum::body::Bytes) -> Response {
-    edit(&shared, &name, &headers, &body, "translate", false, crate::edits::Edits::translate)
+async fn set_transform(
+    State(shared): State<Arc<Shared>>,
+    Path(name): Path<String>,
+    headers: HeaderMap,
+    body: axum::body::Bytes,
+) -> Response {
+    edit(
+        &shared,
+        &name,
+        &headers,
+        &body,
+        "translate",
+        false,
+        crate::edits::Edits::translate,
+    )
 }

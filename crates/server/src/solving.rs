@@ -45,11 +45,21 @@ pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepa
         None => (Mesh::build(&scene, request.patches), None),
     };
     let geometry = geometry_of(&scene, &mesh);
-    Ok(Prepared { scene, mesh, request, scene_id, geometry, built: Mutex::new(built) })
+    Ok(Prepared {
+        scene,
+        mesh,
+        request,
+        scene_id,
+        geometry,
+        built: Mutex::new(built),
+    })
 }
 
 /// The session to solve with: the hierarchy `prepare` built, or form factors computed now.
-fn session_for(prepared: &Prepared, progress: &(dyn Fn(Progress) + Sync)) -> anyhow::Result<Session> {
+fn session_for(
+    prepared: &Prepared,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> anyhow::Result<Session> {
     if let Some(session) = prepared.built.lock().expect("session lock").take() {
         return Ok(session);
     }
@@ -62,7 +72,8 @@ fn session_for(prepared: &Prepared, progress: &(dyn Fn(Progress) + Sync)) -> any
 /// First 8 bytes of SHA-256 over the OBJ, its MTL libraries, the settings and this version.
 fn scene_id(scene_path: &Path, request: &SolveRequest) -> anyhow::Result<u64> {
     let mut hasher = Sha256::new();
-    let text = std::fs::read(scene_path).with_context(|| format!("{}: cannot read", scene_path.display()))?;
+    let text = std::fs::read(scene_path)
+        .with_context(|| format!("{}: cannot read", scene_path.display()))?;
     hasher.update(&text);
     let folder = scene_path.parent().unwrap_or(Path::new("."));
     for line in String::from_utf8_lossy(&text).lines() {
@@ -72,17 +83,34 @@ fn scene_id(scene_path: &Path, request: &SolveRequest) -> anyhow::Result<u64> {
     }
     hasher.update(format!("{request:?} {}", env!("CARGO_PKG_VERSION")));
     let digest = hasher.finalize();
-    Ok(u64::from_le_bytes(digest[..8].try_into().expect("SHA-256 has 32 bytes")))
+    Ok(u64::from_le_bytes(
+        digest[..8].try_into().expect("SHA-256 has 32 bytes"),
+    ))
 }
 
 fn geometry_of(scene: &Scene, mesh: &Mesh) -> Geometry {
     let to_f32 = |v: DVec3| v.as_vec3().to_array();
     Geometry {
         positions: mesh.positions.iter().map(|p| to_f32(*p)).collect(),
-        patches: mesh.patches.iter().map(|p| if p.corner_count() == 4 { p.corners } else { [p.corners[0], p.corners[1], p.corners[2], NO_CORNER] }).collect(),
+        patches: mesh
+            .patches
+            .iter()
+            .map(|p| {
+                if p.corner_count() == 4 {
+                    p.corners
+                } else {
+                    [p.corners[0], p.corners[1], p.corners[2], NO_CORNER]
+                }
+            })
+            .collect(),
         patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
         objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
-        camera: scene.view.map(|v| Camera { eye: to_f32(v.eye), target: to_f32(v.target), up: to_f32(v.up), vertical_fov_degrees: v.vertical_fov_degrees as f32 }),
+        camera: scene.view.map(|v| Camera {
+            eye: to_f32(v.eye),
+            target: to_f32(v.target),
+            up: to_f32(v.up),
+            vertical_fov_degrees: v.vertical_fov_degrees as f32,
+        }),
     }
 }
 
@@ -92,12 +120,23 @@ fn to_f32(radiosity: &[Rgb]) -> Vec<[f32; 3]> {
 
 /// The state viewers see before the solve: every patch at its own emission.
 pub fn emission_only(prepared: &Prepared) -> Vec<[f32; 3]> {
-    to_f32(&prepared.mesh.patches.iter().map(|p| p.emission).collect::<Vec<_>>())
+    to_f32(
+        &prepared
+            .mesh
+            .patches
+            .iter()
+            .map(|p| p.emission)
+            .collect::<Vec<_>>(),
+    )
 }
 
 /// Creates the hub for `prepared`, publishing its emission-only state.
 pub fn hub_for(prepared: &Prepared) -> Hub {
-    Hub::new(prepared.scene_id, &prepared.geometry, &emission_only(prepared))
+    Hub::new(
+        prepared.scene_id,
+        &prepared.geometry,
+        &emission_only(prepared),
+    )
 }
 
 #[derive(Encode, Decode)]
@@ -115,8 +154,15 @@ fn cache_path(dir: &Path, scene_id: u64) -> PathBuf {
 fn read_cache(path: &Path, patch_count: usize) -> Option<CachedSolution> {
     let bytes = std::fs::read(path).ok()?;
     let body = bytes.strip_prefix(CACHE_MAGIC.as_slice())?;
-    let (cached, _): (CachedSolution, usize) = bincode::decode_from_slice(body, bincode::config::standard()).ok()?;
-    (cached.radiosity.len() == patch_count && cached.radiosity.iter().flatten().all(|c| c.is_finite() && *c >= 0.0)).then_some(cached)
+    let (cached, _): (CachedSolution, usize) =
+        bincode::decode_from_slice(body, bincode::config::standard()).ok()?;
+    (cached.radiosity.len() == patch_count
+        && cached
+            .radiosity
+            .iter()
+            .flatten()
+            .all(|c| c.is_finite() && *c >= 0.0))
+    .then_some(cached)
 }
 
 /// Writes atomically: a temporary file in the same folder, renamed over the target.
@@ -126,7 +172,8 @@ fn write_cache(dir: &Path, path: &Path, cached: &CachedSolution) -> anyhow::Resu
     file.write_all(CACHE_MAGIC)?;
     bincode::encode_into_std_write(cached, &mut file, bincode::config::standard())?;
     file.as_file().sync_all()?;
-    file.persist(path).with_context(|| format!("{}: cannot write", path.display()))?;
+    file.persist(path)
+        .with_context(|| format!("{}: cannot write", path.display()))?;
     Ok(())
 }
 
@@ -141,14 +188,24 @@ pub enum Solution {
 
 /// Solves (or reads the cache), publishing progressive frames and then the final one.
 /// Blocking: run it on a blocking thread.
-pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option<&Path>) -> anyhow::Result<Solution> {
+pub fn solve_and_publish(
+    prepared: &Prepared,
+    shared: &Shared,
+    cache_dir: Option<&Path>,
+) -> anyhow::Result<Solution> {
     let hub = &shared.hub;
     // A hierarchy is built before viewers connect (its leaves are the patches): a cached
     // solution would save only its last solve.
-    let cache = cache_dir.filter(|_| prepared.request.hierarchy.is_none()).map(|dir| (dir, cache_path(dir, prepared.scene_id)));
-    if let Some(cached) = cache.as_ref().and_then(|(_, path)| read_cache(path, prepared.mesh.patches.len())) {
+    let cache = cache_dir
+        .filter(|_| prepared.request.hierarchy.is_none())
+        .map(|dir| (dir, cache_path(dir, prepared.scene_id)));
+    if let Some(cached) = cache
+        .as_ref()
+        .and_then(|(_, path)| read_cache(path, prepared.mesh.patches.len()))
+    {
         tracing::info!("solution read from the cache");
-        *shared.report.lock().expect("report lock") = serde_json::from_str(&cached.report_json).ok();
+        *shared.report.lock().expect("report lock") =
+            serde_json::from_str(&cached.report_json).ok();
         hub.publish(&cached.radiosity, true);
         return Ok(Solution::Cached(cached.radiosity));
     }
@@ -166,17 +223,38 @@ pub fn solve_and_publish(prepared: &Prepared, shared: &Shared, cache_dir: Option
     let report = session.solve(&progress);
     let radiosity = to_f32(session.radiosity());
     let s = report.seconds;
-    *shared.metrics.solve_seconds.lock().expect("metrics lock") = vec![("mesh", s.mesh), ("form_factors", s.form_factors), ("solve", s.solve), ("total", s.total)];
-    tracing::info!(patches = report.patches, iterations = report.iterations, residual = report.residual, seconds = s.total, "solved");
+    *shared.metrics.solve_seconds.lock().expect("metrics lock") = vec![
+        ("mesh", s.mesh),
+        ("form_factors", s.form_factors),
+        ("solve", s.solve),
+        ("total", s.total),
+    ];
+    tracing::info!(
+        patches = report.patches,
+        iterations = report.iterations,
+        residual = report.residual,
+        seconds = s.total,
+        "solved"
+    );
     if let (Some(asked), Some(stats)) = (prepared.request.hierarchy, report.hierarchy) {
-        stats.budget_warnings(&asked).iter().for_each(|warning| tracing::warn!("{warning}"));
+        stats
+            .budget_warnings(&asked)
+            .iter()
+            .for_each(|warning| tracing::warn!("{warning}"));
     }
     let report_json = serde_json::to_string(&report)?;
     // The report goes in before the final frame: a viewer that sees "final" may ask for it at once.
     *shared.report.lock().expect("report lock") = serde_json::from_str(&report_json).ok();
     hub.publish(&radiosity, true);
     if let Some((dir, path)) = cache {
-        write_cache(dir, &path, &CachedSolution { radiosity, report_json })?;
+        write_cache(
+            dir,
+            &path,
+            &CachedSolution {
+                radiosity,
+                report_json,
+            },
+        )?;
     }
     Ok(Solution::Live(Box::new(session)))
 }
@@ -189,9 +267,16 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, solution: Solution) -> 
         Solution::Cached(radiosity) => {
             // Form factors are computed on the first edit only: a cached scene nobody edits
             // never pays for them.
-            let Some(batch) = shared.edits.wait() else { return Ok(()) };
+            let Some(batch) = shared.edits.wait() else {
+                return Ok(());
+            };
             let mut session = session_for(prepared, &solver::no_progress)?;
-            session.adopt_solution(radiosity.iter().map(|c| Rgb::new(c[0] as f64, c[1] as f64, c[2] as f64)).collect());
+            session.adopt_solution(
+                radiosity
+                    .iter()
+                    .map(|c| Rgb::new(c[0] as f64, c[1] as f64, c[2] as f64))
+                    .collect(),
+            );
             apply(&mut session, shared, batch);
             session
         }
@@ -212,7 +297,13 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
         match session.translate(object, DVec3::from(*offset)) {
             Ok(report) => {
                 moved = true;
-                tracing::info!(object, pairs = report.pairs, entries = report.entries, ms = report.seconds * 1e3, "moved");
+                tracing::info!(
+                    object,
+                    pairs = report.pairs,
+                    entries = report.entries,
+                    ms = report.seconds * 1e3,
+                    "moved"
+                );
             }
             Err(error) => tracing::warn!("move refused: {error}"),
         }
@@ -221,7 +312,9 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
     if moved {
         // The moved scene from the current answer, then its new geometry for viewers.
         report = Some(session.solve(&solver::no_progress));
-        shared.hub.replace_geometry(geometry_of(session.scene(), session.mesh()));
+        shared
+            .hub
+            .replace_geometry(geometry_of(session.scene(), session.mesh()));
     }
     if !batch.emissions.is_empty() {
         for (object, emission) in &batch.emissions {
@@ -235,8 +328,17 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
     if let Ok(json) = serde_json::to_value(&report) {
         *shared.report.lock().expect("report lock") = Some(json);
     }
-    let version = shared.hub.publish(&to_f32(session.radiosity()), report.converged);
-    tracing::info!(version, emissions = batch.emissions.len(), moves = batch.moves.len(), iterations = report.iterations, ms = started.elapsed().as_secs_f64() * 1e3, "re-solved");
+    let version = shared
+        .hub
+        .publish(&to_f32(session.radiosity()), report.converged);
+    tracing::info!(
+        version,
+        emissions = batch.emissions.len(),
+        moves = batch.moves.len(),
+        iterations = report.iterations,
+        ms = started.elapsed().as_secs_f64() * 1e3,
+        "re-solved"
+    );
     if moved {
         // Keep the lights' next edits instant on the moved scene.
         session.prepare_emitters();
@@ -260,7 +362,12 @@ pub fn shared_for(prepared: &Prepared, limits: crate::Limits, token: String) -> 
 /// The emitting objects and their emission as loaded, for animations.
 pub fn emitters(prepared: &Prepared) -> Vec<(String, [f64; 3])> {
     let mut found: Vec<(String, [f64; 3])> = Vec::new();
-    for patch in prepared.mesh.patches.iter().filter(|p| p.emission.max_element() > 0.0) {
+    for patch in prepared
+        .mesh
+        .patches
+        .iter()
+        .filter(|p| p.emission.max_element() > 0.0)
+    {
         let name = &prepared.scene.objects[patch.object as usize].name;
         if !found.iter().any(|(n, _)| n == name) {
             found.push((name.clone(), patch.emission.to_array()));

@@ -1,8 +1,8 @@
 //! One viewer's connection: hello, the current frame, then every newer version (as a delta
 //! when the viewer holds its base), until the viewer leaves, misbehaves or stalls.
 
-use crate::metrics::{DropReason, Metrics};
 use crate::Shared;
+use crate::metrics::{DropReason, Metrics};
 use axum::extract::ws::{CloseFrame, Message, WebSocket, close_code};
 use bytes::Bytes;
 use futures_util::{SinkExt, StreamExt};
@@ -51,7 +51,13 @@ pub fn try_admit(shared: &Arc<Shared>, ip: IpAddr) -> Result<ViewerSlot, Refusal
         return Err(Refusal::AddressFull);
     }
     let limit = shared.limits.max_viewers as u64;
-    if metrics.viewers.fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| (n < limit).then_some(n + 1)).is_err() {
+    if metrics
+        .viewers
+        .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+            (n < limit).then_some(n + 1)
+        })
+        .is_err()
+    {
         metrics.refused.fetch_add(1, Ordering::Relaxed);
         if *from_ip == 0 {
             per_ip.remove(&ip);
@@ -68,7 +74,9 @@ fn classify(error: axum::Error) -> Option<&'static str> {
     use tokio_tungstenite::tungstenite::Error;
     match error.into_inner().downcast::<Error>().map(|e| *e) {
         Ok(Error::Capacity(_)) => Some("message too large"),
-        Ok(Error::Protocol(tokio_tungstenite::tungstenite::error::ProtocolError::ResetWithoutClosingHandshake)) => None,
+        Ok(Error::Protocol(
+            tokio_tungstenite::tungstenite::error::ProtocolError::ResetWithoutClosingHandshake,
+        )) => None,
         Ok(Error::ConnectionClosed | Error::AlreadyClosed | Error::Io(_)) => None,
         Ok(_) => Some("malformed WebSocket message"),
         Err(_) => None,
@@ -97,7 +105,10 @@ pub async fn serve_viewer(socket: WebSocket, slot: ViewerSlot) {
         let mut held_geometry = geometry.version;
         for bytes in [geometry.hello.clone(), first.full.clone()] {
             sent(&bytes);
-            if !matches!(timeout(limits.send_timeout, sink.send(Message::Binary(bytes))).await, Ok(Ok(()))) {
+            if !matches!(
+                timeout(limits.send_timeout, sink.send(Message::Binary(bytes))).await,
+                Ok(Ok(()))
+            ) {
                 break 'session End::Dropped(DropReason::Slow, "send timed out");
             }
         }
@@ -164,17 +175,29 @@ pub async fn serve_viewer(socket: WebSocket, slot: ViewerSlot) {
             if let Message::Binary(bytes) = &outgoing {
                 sent(bytes);
             }
-            if !matches!(timeout(limits.send_timeout, sink.send(outgoing)).await, Ok(Ok(()))) {
+            if !matches!(
+                timeout(limits.send_timeout, sink.send(outgoing)).await,
+                Ok(Ok(()))
+            ) {
                 break 'session End::Dropped(DropReason::Slow, "send timed out");
             }
         }
     };
-    let close = |code, reason: &str| Message::Close(Some(CloseFrame { code, reason: reason.into() }));
+    let close = |code, reason: &str| {
+        Message::Close(Some(CloseFrame {
+            code,
+            reason: reason.into(),
+        }))
+    };
     let farewell = match end {
         End::Left => None,
         End::Dropped(reason, text) => {
             metrics.dropped(reason);
-            let code = if reason == DropReason::BadMessage { close_code::POLICY } else { close_code::AWAY };
+            let code = if reason == DropReason::BadMessage {
+                close_code::POLICY
+            } else {
+                close_code::AWAY
+            };
             Some(close(code, text))
         }
         End::Shutdown => Some(close(close_code::AWAY, "server shutting down")),

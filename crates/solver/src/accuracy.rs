@@ -52,7 +52,9 @@ pub fn corner_radiosity(mesh: &Mesh, radiosity: &[Rgb]) -> Vec<Rgb> {
             sums[c as usize].1 += patch.area;
         }
     }
-    sums.into_iter().map(|(sum, area)| if area > 0.0 { sum / area } else { Rgb::ZERO }).collect()
+    sums.into_iter()
+        .map(|(sum, area)| if area > 0.0 { sum / area } else { Rgb::ZERO })
+        .collect()
 }
 
 /// Barycentric coordinates of `p` (in the plane) in triangle `a, b, c`.
@@ -77,7 +79,12 @@ fn locate(mesh: &Mesh, corners: &[Rgb], faces: &[Range<usize>], probe: &Probe) -
         let ids = &patch.corners[..patch.corner_count()];
         for k in 1..ids.len() - 1 {
             let tri = [ids[0], ids[k], ids[k + 1]];
-            let weights = barycentric(p, mesh.positions[tri[0] as usize], mesh.positions[tri[1] as usize], mesh.positions[tri[2] as usize]);
+            let weights = barycentric(
+                p,
+                mesh.positions[tri[0] as usize],
+                mesh.positions[tri[1] as usize],
+                mesh.positions[tri[2] as usize],
+            );
             let inside = weights.iter().cloned().fold(f64::INFINITY, f64::min);
             if inside > best.0 {
                 let smooth = (0..3).map(|i| corners[tri[i] as usize] * weights[i]).sum();
@@ -85,7 +92,10 @@ fn locate(mesh: &Mesh, corners: &[Rgb], faces: &[Range<usize>], probe: &Probe) -
             }
         }
     }
-    Located { patch: best.1, smooth: best.2 }
+    Located {
+        patch: best.1,
+        smooth: best.2,
+    }
 }
 
 /// Patches of each face, as index ranges ([`Mesh::build`] meshes face by face).
@@ -107,13 +117,22 @@ fn stats(pairs: &[(Rgb, Rgb)]) -> ErrorStats {
     let reference_sq: f64 = pairs.iter().map(|(_, r)| r.length_squared()).sum();
     let error_sq: f64 = pairs.iter().map(|(e, r)| (*e - *r).length_squared()).sum();
     let reference_rms = (reference_sq / pairs.len().max(1) as f64).sqrt();
-    let largest = pairs.iter().map(|(e, r)| (*e - *r).length()).fold(0.0, f64::max);
-    let (estimated_sum, reference_sum) = pairs.iter().fold((0.0, 0.0), |(a, b), (e, r)| (a + e.element_sum(), b + r.element_sum()));
+    let largest = pairs
+        .iter()
+        .map(|(e, r)| (*e - *r).length())
+        .fold(0.0, f64::max);
+    let (estimated_sum, reference_sum) = pairs.iter().fold((0.0, 0.0), |(a, b), (e, r)| {
+        (a + e.element_sum(), b + r.element_sum())
+    });
     let ratio = |x: f64, y: f64| if y > 0.0 { x / y } else { 0.0 };
     ErrorStats {
         rms: ratio(error_sq.sqrt(), reference_sq.sqrt()),
         max: ratio(largest, reference_rms),
-        energy: if reference_sum > 0.0 { estimated_sum / reference_sum - 1.0 } else { 0.0 },
+        energy: if reference_sum > 0.0 {
+            estimated_sum / reference_sum - 1.0
+        } else {
+            0.0
+        },
     }
 }
 
@@ -121,7 +140,15 @@ fn stats(pairs: &[(Rgb, Rgb)]) -> ErrorStats {
 pub fn evaluate(scene: &Scene, mesh: &Mesh, radiosity: &[Rgb], probes: &[Probe]) -> SolutionError {
     let corners = corner_radiosity(mesh, radiosity);
     let faces = face_ranges(mesh, scene.faces.len());
-    let counted: Vec<&Probe> = probes.iter().filter(|p| scene.faces.get(p.face as usize).is_some_and(|f| f.emission == Rgb::ZERO)).collect();
+    let counted: Vec<&Probe> = probes
+        .iter()
+        .filter(|p| {
+            scene
+                .faces
+                .get(p.face as usize)
+                .is_some_and(|f| f.emission == Rgb::ZERO)
+        })
+        .collect();
     let (mut flat, mut smooth) = (Vec::new(), Vec::new());
     for probe in &counted {
         let reference = Rgb::from(probe.radiosity);
@@ -129,12 +156,22 @@ pub fn evaluate(scene: &Scene, mesh: &Mesh, radiosity: &[Rgb], probes: &[Probe])
         flat.push((radiosity[located.patch], reference));
         smooth.push((located.smooth, reference));
     }
-    let noise_sq: f64 = counted.iter().map(|p| Rgb::from(p.standard_error).length_squared()).sum();
-    let reference_sq: f64 = counted.iter().map(|p| Rgb::from(p.radiosity).length_squared()).sum();
+    let noise_sq: f64 = counted
+        .iter()
+        .map(|p| Rgb::from(p.standard_error).length_squared())
+        .sum();
+    let reference_sq: f64 = counted
+        .iter()
+        .map(|p| Rgb::from(p.radiosity).length_squared())
+        .sum();
     SolutionError {
         probes: counted.len(),
         flat: stats(&flat),
         smooth: stats(&smooth),
-        reference_noise: if reference_sq > 0.0 { (noise_sq / reference_sq).sqrt() } else { 0.0 },
+        reference_noise: if reference_sq > 0.0 {
+            (noise_sq / reference_sq).sqrt()
+        } else {
+            0.0
+        },
     }
 }

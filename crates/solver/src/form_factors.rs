@@ -11,8 +11,8 @@ use crate::geometry::{bounds, cosine_direction, point_to_polygon_form_factor};
 use crate::mesh::{Mesh, Patch};
 use crate::scene::Rgb;
 use crate::visibility::Occluders;
-use rayon::prelude::*;
 use glam::DVec3;
+use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
 /// How light moves between patches: what every solver needs from form factors. A dense matrix
@@ -76,7 +76,11 @@ pub(crate) fn near_pair_level(p: &Patch, q: &Patch) -> Option<u32> {
         return None;
     }
     let gap = distance - q.radius;
-    let level = if gap <= 0.0 { MAX_PAIR_LEVEL } else { ((QUADRATURE_DENSITY * p.radius / gap).ceil() as u32).clamp(1, MAX_PAIR_LEVEL) };
+    let level = if gap <= 0.0 {
+        MAX_PAIR_LEVEL
+    } else {
+        ((QUADRATURE_DENSITY * p.radius / gap).ceil() as u32).clamp(1, MAX_PAIR_LEVEL)
+    };
     Some(level)
 }
 
@@ -92,7 +96,13 @@ pub(crate) fn sees_closed_view(p: &Patch, index: usize, occluders: &Occluders) -
     (0..CLOSURE_RAYS).all(|k| {
         let (u, v) = stratified_uv(k, seed);
         let (s, t) = stratified_uv(k, splitmix64(seed));
-        occluders.closest_hit(p.polygon.point_at(u, v), cosine_direction(p.normal, s, t), p.face).is_some_and(|hit| hit.front)
+        occluders
+            .closest_hit(
+                p.polygon.point_at(u, v),
+                cosine_direction(p.normal, s, t),
+                p.face,
+            )
+            .is_some_and(|hit| hit.front)
     })
 }
 
@@ -108,7 +118,13 @@ pub(crate) fn rays_for_pair(p: &Patch, q: &Patch, settings: &FormFactorSettings)
 /// passes between them in either direction (surfaces are one-sided).
 pub(crate) fn mutually_facing(p: &Patch, q: &Patch) -> bool {
     let tolerance = 1e-12 * (p.radius + q.radius);
-    let in_front = |of: &Patch, other: &Patch| other.polygon.corners().iter().any(|c| (*c - of.centroid).dot(of.normal) > tolerance);
+    let in_front = |of: &Patch, other: &Patch| {
+        other
+            .polygon
+            .corners()
+            .iter()
+            .any(|c| (*c - of.centroid).dot(of.normal) > tolerance)
+    };
     in_front(p, q) && in_front(q, p)
 }
 
@@ -137,14 +153,22 @@ pub(crate) fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
     // Roberts 2018, "The Unreasonable Effectiveness of Quasirandom Sequences": 1/phi_2, 1/phi_2^2.
     const A1: f64 = 0.754_877_666_246_692_7;
     const A2: f64 = 0.569_840_290_998_053_2;
-    let (u0, v0) = ((offset >> 11) as f64 / (1u64 << 53) as f64, (offset & 0xFFFF_FFFF) as f64 / 4_294_967_296.0);
+    let (u0, v0) = (
+        (offset >> 11) as f64 / (1u64 << 53) as f64,
+        (offset & 0xFFFF_FFFF) as f64 / 4_294_967_296.0,
+    );
     let inset = |x: f64| 1e-3 + (1.0 - 2e-3) * x.fract();
     (inset(u0 + k as f64 * A1), inset(v0 + k as f64 * A2))
 }
 
 /// The `rays` shadow segments between `p` and `q`: stratified points on both, decorrelated per
 /// pair, the same every time for the same pair.
-fn pair_segments<'a>(p: &'a Patch, q: &'a Patch, pair: (usize, usize), rays: u32) -> impl Iterator<Item = (DVec3, DVec3)> + 'a {
+fn pair_segments<'a>(
+    p: &'a Patch,
+    q: &'a Patch,
+    pair: (usize, usize),
+    rays: u32,
+) -> impl Iterator<Item = (DVec3, DVec3)> + 'a {
     let seed = pair_seed(pair.0, pair.1);
     let (seed_p, seed_q) = (seed, splitmix64(seed));
     (0..rays).map(move |k| {
@@ -155,8 +179,16 @@ fn pair_segments<'a>(p: &'a Patch, q: &'a Patch, pair: (usize, usize), rays: u32
 }
 
 /// How many of `rays` segments between `p` and `q` nothing blocks.
-pub(crate) fn clear_rays(p: &Patch, q: &Patch, pair: (usize, usize), rays: u32, occluders: &Occluders) -> u32 {
-    pair_segments(p, q, pair, rays).filter(|(a, b)| occluders.segment_is_clear(*a, *b, [p.face, q.face])).count() as u32
+pub(crate) fn clear_rays(
+    p: &Patch,
+    q: &Patch,
+    pair: (usize, usize),
+    rays: u32,
+    occluders: &Occluders,
+) -> u32 {
+    pair_segments(p, q, pair, rays)
+        .filter(|(a, b)| occluders.segment_is_clear(*a, *b, [p.face, q.face]))
+        .count() as u32
 }
 
 /// Whether the segment from `a` to `b` meets the box `(lo, hi)` (the slab method).
@@ -170,7 +202,10 @@ fn segment_meets_box(a: DVec3, b: DVec3, (lo, hi): (DVec3, DVec3)) -> bool {
             }
             continue;
         }
-        let (t0, t1) = ((lo[axis] - a[axis]) / d[axis], (hi[axis] - a[axis]) / d[axis]);
+        let (t0, t1) = (
+            (lo[axis] - a[axis]) / d[axis],
+            (hi[axis] - a[axis]) / d[axis],
+        );
         enter = enter.max(t0.min(t1));
         exit = exit.min(t0.max(t1));
         if enter > exit {
@@ -184,7 +219,9 @@ fn segment_meets_box(a: DVec3, b: DVec3, (lo, hi): (DVec3, DVec3)) -> bool {
 /// analytic point-to-polygon factor, with the receiver's quadrature `level`.
 pub(crate) fn unoccluded_form_factor(p: &Patch, q: &Patch, level: u32) -> f64 {
     let mut sum = 0.0;
-    p.polygon.for_each_quadrature_point(level, |x, weight| sum += weight * point_to_polygon_form_factor(x, p.normal, &q.polygon, q.normal));
+    p.polygon.for_each_quadrature_point(level, |x, weight| {
+        sum += weight * point_to_polygon_form_factor(x, p.normal, &q.polygon, q.normal)
+    });
     sum
 }
 
@@ -230,7 +267,13 @@ pub struct UpdateStats {
 }
 
 /// Clear-ray count of pair `(i, j)`, or [`NOT_FACING`]; and the rays cast.
-fn pair_visibility(patches: &[Patch], i: usize, j: usize, occluders: &Occluders, settings: &FormFactorSettings) -> (u8, u64) {
+fn pair_visibility(
+    patches: &[Patch],
+    i: usize,
+    j: usize,
+    occluders: &Occluders,
+    settings: &FormFactorSettings,
+) -> (u8, u64) {
     let (p, q) = (&patches[i], &patches[j]);
     if !mutually_facing(p, q) {
         return (NOT_FACING, 0);
@@ -241,7 +284,13 @@ fn pair_visibility(patches: &[Patch], i: usize, j: usize, occluders: &Occluders,
 
 /// One entry before normalisation: the receiver-integrated analytic factor times the clear
 /// fraction of shadow rays.
-fn raw_entry(patches: &[Patch], i: usize, j: usize, clear: u8, settings: &FormFactorSettings) -> f64 {
+fn raw_entry(
+    patches: &[Patch],
+    i: usize,
+    j: usize,
+    clear: u8,
+    settings: &FormFactorSettings,
+) -> f64 {
     if clear == NOT_FACING || clear == 0 || i == j {
         return 0.0;
     }
@@ -254,15 +303,26 @@ fn raw_entry(patches: &[Patch], i: usize, j: usize, clear: u8, settings: &FormFa
 /// rays meet a front face) sends all its light to patches, so its row sums to one; closed
 /// enclosures stay exact for bright surfaces (rho -> 1) and with occluders, whatever the
 /// sampling noise of visibility. Returns the factor applied.
-fn normalise_row(patches: &[Patch], i: usize, raw: impl Iterator<Item = f64>, occluders: &Occluders, row: &mut [f32]) -> f64 {
+fn normalise_row(
+    patches: &[Patch],
+    i: usize,
+    raw: impl Iterator<Item = f64>,
+    occluders: &Occluders,
+    row: &mut [f32],
+) -> f64 {
     let mut sum = 0.0;
     for (value, r) in row.iter_mut().zip(raw) {
         *value = r as f32;
         sum += r;
     }
-    let scale = if sum > 0.0 && sees_closed_view(&patches[i], i, occluders) { 1.0 / sum } else { 1.0 };
+    let scale = if sum > 0.0 && sees_closed_view(&patches[i], i, occluders) {
+        1.0 / sum
+    } else {
+        1.0
+    };
     if scale != 1.0 {
-        row.iter_mut().for_each(|value| *value = (*value as f64 * scale) as f32);
+        row.iter_mut()
+            .for_each(|value| *value = (*value as f64 * scale) as f32);
     }
     scale
 }
@@ -274,7 +334,12 @@ impl DenseFormFactors {
     }
 
     /// Computes every form factor of `mesh`, reporting rows done through `progress`.
-    pub fn compute(mesh: &Mesh, occluders: &Occluders, settings: &FormFactorSettings, progress: &(dyn Fn(Progress) + Sync)) -> Self {
+    pub fn compute(
+        mesh: &Mesh,
+        occluders: &Occluders,
+        settings: &FormFactorSettings,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Self {
         let patches = &mesh.patches;
         let n = patches.len();
         let rows_done = AtomicUsize::new(0);
@@ -288,26 +353,48 @@ impl DenseFormFactors {
         // then mirrored so pass 2 reads rows sequentially.
         let rays_cast = AtomicU64::new(0);
         let mut clear = vec![NOT_FACING; n * n];
-        clear.par_chunks_mut(n.max(1)).enumerate().for_each(|(i, row)| {
-            let cast: u64 = (i + 1..n).map(|j| {
-                let (count, rays) = pair_visibility(patches, i, j, occluders, settings);
-                row[j] = count;
-                rays
-            }).sum();
-            rays_cast.fetch_add(cast, Ordering::Relaxed);
-            report();
-        });
+        clear
+            .par_chunks_mut(n.max(1))
+            .enumerate()
+            .for_each(|(i, row)| {
+                let cast: u64 = (i + 1..n)
+                    .map(|j| {
+                        let (count, rays) = pair_visibility(patches, i, j, occluders, settings);
+                        row[j] = count;
+                        rays
+                    })
+                    .sum();
+                rays_cast.fetch_add(cast, Ordering::Relaxed);
+                report();
+            });
         mirror_upper_triangle(&mut clear, n);
         // Pass 2: each row integrates its receiver's view, far sources at the centroid, near
         // ones with their own finer rule.
         let mut values = vec![0f32; n * n];
         let mut row_scale = vec![1.0; n];
-        values.par_chunks_mut(n.max(1)).zip(row_scale.par_iter_mut()).enumerate().for_each(|(i, (row, scale))| {
-            let clear_row = &clear[i * n..(i + 1) * n];
-            *scale = normalise_row(patches, i, (0..n).map(|j| raw_entry(patches, i, j, clear_row[j], settings)), occluders, row);
-            report();
-        });
-        DenseFormFactors { n, values, clear, row_scale, settings: *settings, rays_cast: rays_cast.into_inner() }
+        values
+            .par_chunks_mut(n.max(1))
+            .zip(row_scale.par_iter_mut())
+            .enumerate()
+            .for_each(|(i, (row, scale))| {
+                let clear_row = &clear[i * n..(i + 1) * n];
+                *scale = normalise_row(
+                    patches,
+                    i,
+                    (0..n).map(|j| raw_entry(patches, i, j, clear_row[j], settings)),
+                    occluders,
+                    row,
+                );
+                report();
+            });
+        DenseFormFactors {
+            n,
+            values,
+            clear,
+            row_scale,
+            settings: *settings,
+            rays_cast: rays_cast.into_inner(),
+        }
     }
 
     /// Updates after the patches marked in `moved` changed place (`mesh` and `occluders` are
@@ -315,13 +402,32 @@ impl DenseFormFactors {
     /// traced again when it involves a moved patch, or when one of its own shadow segments
     /// crosses `region`: all geometry that changed lies there, so no other segment's answer can
     /// differ. Only changed entries are integrated again.
-    pub fn update_moved(&mut self, mesh: &Mesh, occluders: &Occluders, moved: &[bool], region: (DVec3, DVec3)) -> UpdateStats {
+    pub fn update_moved(
+        &mut self,
+        mesh: &Mesh,
+        occluders: &Occluders,
+        moved: &[bool],
+        region: (DVec3, DVec3),
+    ) -> UpdateStats {
         let (patches, n, settings) = (&mesh.patches, self.n, self.settings);
-        let boxes: Vec<(DVec3, DVec3)> = patches.iter().map(|p| bounds(p.polygon.corners().iter().copied())).collect();
+        let boxes: Vec<(DVec3, DVec3)> = patches
+            .iter()
+            .map(|p| bounds(p.polygon.corners().iter().copied()))
+            .collect();
         // Grown by a relative hair, so that f32 ray tracing near the edge cannot disagree.
-        let margin = 1e-6 * (region.1 - region.0).length().max(boxes.iter().map(|b| (b.1 - b.0).length()).fold(0.0, f64::max));
-        let region = (region.0 - DVec3::splat(margin), region.1 + DVec3::splat(margin));
-        let overlaps = |(lo, hi): (DVec3, DVec3)| lo.cmple(region.1).all() && hi.cmpge(region.0).all();
+        let margin = 1e-6
+            * (region.1 - region.0).length().max(
+                boxes
+                    .iter()
+                    .map(|b| (b.1 - b.0).length())
+                    .fold(0.0, f64::max),
+            );
+        let region = (
+            region.0 - DVec3::splat(margin),
+            region.1 + DVec3::splat(margin),
+        );
+        let overlaps =
+            |(lo, hi): (DVec3, DVec3)| lo.cmple(region.1).all() && hi.cmpge(region.0).all();
         let pairs = AtomicUsize::new(0);
         // Pass A: the pairs that can have changed, upper triangle; each row lists its changes.
         let changed_upper: Vec<Vec<u32>> = self
@@ -337,9 +443,13 @@ impl DenseFormFactors {
                         // Every segment from p to q stays within max(r_p, r_q) of the segment
                         // between their centroids: one slab test rules most pairs out.
                         let reach = DVec3::splat(p.radius.max(q.radius));
-                        segment_meets_box(p.centroid, q.centroid, (region.0 - reach, region.1 + reach))
-                            && mutually_facing(p, q)
-                            && pair_segments(p, q, (i, j), rays_for_pair(p, q, &settings)).any(|(a, b)| segment_meets_box(a, b, region))
+                        segment_meets_box(
+                            p.centroid,
+                            q.centroid,
+                            (region.0 - reach, region.1 + reach),
+                        ) && mutually_facing(p, q)
+                            && pair_segments(p, q, (i, j), rays_for_pair(p, q, &settings))
+                                .any(|(a, b)| segment_meets_box(a, b, region))
                     };
                     if !(moved[i] || moved[j] || (overlaps(pair_box) && crosses())) {
                         continue;
@@ -368,27 +478,58 @@ impl DenseFormFactors {
         // (an open view) is only written where it changed.
         let clear = &self.clear;
         let entries = AtomicUsize::new(0);
-        self.values.par_chunks_mut(n.max(1)).zip(self.row_scale.par_iter_mut()).enumerate().filter(|(i, _)| !changed[*i].is_empty()).for_each(|(i, (row, scale))| {
-            let clear_row = &clear[i * n..(i + 1) * n];
-            if moved[i] {
-                entries.fetch_add(n, Ordering::Relaxed);
-                *scale = normalise_row(patches, i, (0..n).map(|j| raw_entry(patches, i, j, clear_row[j], &settings)), occluders, row);
-                return;
-            }
-            entries.fetch_add(changed[i].len(), Ordering::Relaxed);
-            let updates: Vec<(usize, f64)> = changed[i].iter().map(|&j| (j as usize, raw_entry(patches, i, j as usize, clear_row[j as usize], &settings))).collect();
-            let old_raw_sum: f64 = row.iter().map(|v| *v as f64).sum::<f64>() / *scale;
-            let raw_sum = old_raw_sum + updates.iter().map(|(j, raw)| raw - row[*j] as f64 / *scale).sum::<f64>();
-            let new_scale = if raw_sum > 0.0 && sees_closed_view(&patches[i], i, occluders) { 1.0 / raw_sum } else { 1.0 };
-            if new_scale == 1.0 && *scale == 1.0 {
-                updates.iter().for_each(|(j, raw)| row[*j] = *raw as f32);
-            } else {
-                let mut raw: Vec<f64> = row.iter().map(|v| *v as f64 / *scale).collect();
-                updates.iter().for_each(|(j, value)| raw[*j] = *value);
-                *scale = normalise_row(patches, i, raw.into_iter(), occluders, row);
-            }
-        });
-        UpdateStats { pairs: pairs.into_inner(), rows: changed.iter().filter(|c| !c.is_empty()).count(), entries: entries.into_inner() }
+        self.values
+            .par_chunks_mut(n.max(1))
+            .zip(self.row_scale.par_iter_mut())
+            .enumerate()
+            .filter(|(i, _)| !changed[*i].is_empty())
+            .for_each(|(i, (row, scale))| {
+                let clear_row = &clear[i * n..(i + 1) * n];
+                if moved[i] {
+                    entries.fetch_add(n, Ordering::Relaxed);
+                    *scale = normalise_row(
+                        patches,
+                        i,
+                        (0..n).map(|j| raw_entry(patches, i, j, clear_row[j], &settings)),
+                        occluders,
+                        row,
+                    );
+                    return;
+                }
+                entries.fetch_add(changed[i].len(), Ordering::Relaxed);
+                let updates: Vec<(usize, f64)> = changed[i]
+                    .iter()
+                    .map(|&j| {
+                        (
+                            j as usize,
+                            raw_entry(patches, i, j as usize, clear_row[j as usize], &settings),
+                        )
+                    })
+                    .collect();
+                let old_raw_sum: f64 = row.iter().map(|v| *v as f64).sum::<f64>() / *scale;
+                let raw_sum = old_raw_sum
+                    + updates
+                        .iter()
+                        .map(|(j, raw)| raw - row[*j] as f64 / *scale)
+                        .sum::<f64>();
+                let new_scale = if raw_sum > 0.0 && sees_closed_view(&patches[i], i, occluders) {
+                    1.0 / raw_sum
+                } else {
+                    1.0
+                };
+                if new_scale == 1.0 && *scale == 1.0 {
+                    updates.iter().for_each(|(j, raw)| row[*j] = *raw as f32);
+                } else {
+                    let mut raw: Vec<f64> = row.iter().map(|v| *v as f64 / *scale).collect();
+                    updates.iter().for_each(|(j, value)| raw[*j] = *value);
+                    *scale = normalise_row(patches, i, raw.into_iter(), occluders, row);
+                }
+            });
+        UpdateStats {
+            pairs: pairs.into_inner(),
+            rows: changed.iter().filter(|c| !c.is_empty()).count(),
+            entries: entries.into_inner(),
+        }
     }
 
     /// `F_ij`.
@@ -418,7 +559,12 @@ fn dot3(row: &[f32], channels: &[Vec<f64>; 3]) -> Rgb {
             }
         }
     }
-    let total = |c: usize| partial[c].iter().sum::<f64>() + (whole..row.len()).map(|j| row[j] as f64 * channels[c][j]).sum::<f64>();
+    let total = |c: usize| {
+        partial[c].iter().sum::<f64>()
+            + (whole..row.len())
+                .map(|j| row[j] as f64 * channels[c][j])
+                .sum::<f64>()
+    };
     Rgb::new(total(0), total(1), total(2))
 }
 
@@ -430,8 +576,11 @@ impl Transport for DenseFormFactors {
     fn gather(&self, radiosity: &[Rgb], out: &mut [Rgb]) {
         // One channel at a time over contiguous arrays: the matrix-vector product dominates
         // every solver, and this layout lets it vectorise (about 2x the per-row Rgb sum).
-        let channels: [Vec<f64>; 3] = std::array::from_fn(|c| radiosity.iter().map(|b| b[c]).collect());
-        out.par_iter_mut().enumerate().for_each(|(i, o)| *o = dot3(self.row(i), &channels));
+        let channels: [Vec<f64>; 3] =
+            std::array::from_fn(|c| radiosity.iter().map(|b| b[c]).collect());
+        out.par_iter_mut()
+            .enumerate()
+            .for_each(|(i, o)| *o = dot3(self.row(i), &channels));
     }
 
     fn entries(&self) -> Option<&dyn Entries> {
@@ -441,7 +590,11 @@ impl Transport for DenseFormFactors {
 
 impl Entries for DenseFormFactors {
     fn gather_row(&self, i: usize, radiosity: &[Rgb]) -> Rgb {
-        self.row(i).iter().zip(radiosity).map(|(&f, b)| *b * f as f64).sum()
+        self.row(i)
+            .iter()
+            .zip(radiosity)
+            .map(|(&f, b)| *b * f as f64)
+            .sum()
     }
 
     fn for_each_in_column(&self, j: usize, visit: &mut dyn FnMut(usize, f64)) {

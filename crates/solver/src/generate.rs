@@ -78,8 +78,14 @@ impl Writer {
 pub fn furnished_room(pieces: usize, seed: u64, mtl_name: &str) -> GeneratedScene {
     let per_side = (pieces as f64).sqrt().ceil().max(1.0) as usize;
     let side = per_side as f64 * CELL + 2.0;
-    let mut w = Writer { obj: String::new(), rng: Pcg64Mcg::seed_from_u64(seed) };
-    let _ = writeln!(w.obj, "# radcast generate --pieces {pieces} --seed {seed}: a furnished room, {side:.1} x {side:.1} x {HEIGHT} m\nmtllib {mtl_name}");
+    let mut w = Writer {
+        obj: String::new(),
+        rng: Pcg64Mcg::seed_from_u64(seed),
+    };
+    let _ = writeln!(
+        w.obj,
+        "# radcast generate --pieces {pieces} --seed {seed}: a furnished room, {side:.1} x {side:.1} x {HEIGHT} m\nmtllib {mtl_name}"
+    );
     let (x, y, z) = (DVec3::X * side, DVec3::Y * HEIGHT, DVec3::Z * side);
     w.object("floor", "floorboards");
     w.quad(DVec3::ZERO, z, x);
@@ -94,31 +100,66 @@ pub fn furnished_room(pieces: usize, seed: u64, mtl_name: &str) -> GeneratedScen
     let lamps = (side / 4.0).round().max(1.0) as usize;
     for i in 0..lamps {
         for j in 0..lamps {
-            let centre = dvec3((i as f64 + 0.5) * side / lamps as f64, HEIGHT - 0.01, (j as f64 + 0.5) * side / lamps as f64);
+            let centre = dvec3(
+                (i as f64 + 0.5) * side / lamps as f64,
+                HEIGHT - 0.01,
+                (j as f64 + 0.5) * side / lamps as f64,
+            );
             w.object(&format!("lamp_{i}_{j}"), "lamp");
-            w.quad(centre - dvec3(0.3, 0.0, 0.3), DVec3::X * 0.6, DVec3::Z * 0.6);
+            w.quad(
+                centre - dvec3(0.3, 0.0, 0.3),
+                DVec3::X * 0.6,
+                DVec3::Z * 0.6,
+            );
         }
     }
     for piece in 0..pieces {
-        let cell = dvec3(1.0 + (piece % per_side) as f64 * CELL, 0.0, 1.0 + (piece / per_side) as f64 * CELL);
+        let cell = dvec3(
+            1.0 + (piece % per_side) as f64 * CELL,
+            0.0,
+            1.0 + (piece / per_side) as f64 * CELL,
+        );
         let (width, depth) = (w.between(0.4, 1.2), w.between(0.4, 1.2));
-        let corner = cell + dvec3(w.between(0.0, CELL - width), 0.0, w.between(0.0, CELL - depth));
+        let corner = cell
+            + dvec3(
+                w.between(0.0, CELL - width),
+                0.0,
+                w.between(0.0, CELL - depth),
+            );
         let wood = if w.unit() < 0.5 { "oak" } else { "walnut" };
         match w.rng.next_u32() % 3 {
             0 => {
                 w.object(&format!("table_{piece}"), wood);
                 let top = w.between(0.7, 0.8);
-                w.cuboid(corner + DVec3::Y * top, corner + dvec3(width, top + 0.04, depth));
-                for (dx, dz) in [(0.0, 0.0), (width - 0.05, 0.0), (0.0, depth - 0.05), (width - 0.05, depth - 0.05)] {
-                    w.cuboid(corner + dvec3(dx, 0.0, dz), corner + dvec3(dx + 0.05, top, dz + 0.05));
+                w.cuboid(
+                    corner + DVec3::Y * top,
+                    corner + dvec3(width, top + 0.04, depth),
+                );
+                for (dx, dz) in [
+                    (0.0, 0.0),
+                    (width - 0.05, 0.0),
+                    (0.0, depth - 0.05),
+                    (width - 0.05, depth - 0.05),
+                ] {
+                    w.cuboid(
+                        corner + dvec3(dx, 0.0, dz),
+                        corner + dvec3(dx + 0.05, top, dz + 0.05),
+                    );
                 }
             }
             1 => {
-                let fabric = if w.unit() < 0.5 { "fabric_red" } else { "fabric_blue" };
+                let fabric = if w.unit() < 0.5 {
+                    "fabric_red"
+                } else {
+                    "fabric_blue"
+                };
                 w.object(&format!("chair_{piece}"), fabric);
                 let (seat, size) = (0.45, width.min(depth).min(0.6));
                 w.cuboid(corner, corner + dvec3(size, seat, size));
-                w.cuboid(corner + dvec3(0.0, seat, 0.0), corner + dvec3(size, seat + 0.5, 0.08));
+                w.cuboid(
+                    corner + dvec3(0.0, seat, 0.0),
+                    corner + dvec3(size, seat + 0.5, 0.08),
+                );
             }
             _ => {
                 let finish = if w.unit() < 0.5 { "metal" } else { wood };
@@ -130,7 +171,11 @@ pub fn furnished_room(pieces: usize, seed: u64, mtl_name: &str) -> GeneratedScen
     }
     let mut mtl = String::from("# radcast generate: materials of the furnished room\n");
     for (name, kd, ke) in MATERIALS {
-        let _ = writeln!(mtl, "newmtl {name}\nKd {} {} {}\nKe {} {} {}\n", kd[0], kd[1], kd[2], ke[0], ke[1], ke[2]);
+        let _ = writeln!(
+            mtl,
+            "newmtl {name}\nKd {} {} {}\nKe {} {} {}\n",
+            kd[0], kd[1], kd[2], ke[0], ke[1], ke[2]
+        );
     }
     GeneratedScene { obj: w.obj, mtl }
 }
@@ -144,7 +189,10 @@ mod tests {
         let a = furnished_room(50, 7, "room.mtl");
         assert_eq!(a.obj, furnished_room(50, 7, "room.mtl").obj);
         assert_ne!(a.obj, furnished_room(50, 8, "room.mtl").obj);
-        let pieces = ["table_", "chair_", "cabinet_"].iter().map(|kind| a.obj.matches(&format!("o {kind}")).count()).sum::<usize>();
+        let pieces = ["table_", "chair_", "cabinet_"]
+            .iter()
+            .map(|kind| a.obj.matches(&format!("o {kind}")).count())
+            .sum::<usize>();
         assert_eq!(pieces, 50);
     }
 
@@ -154,7 +202,15 @@ mod tests {
         let side = (40f64.sqrt().ceil()) * CELL + 2.0;
         for line in room.obj.lines().filter(|l| l.starts_with("v ")) {
             let p: Vec<f64> = line[2..].split(' ').map(|x| x.parse().unwrap()).collect();
-            assert!(p[0] >= 0.0 && p[0] <= side && p[2] >= 0.0 && p[2] <= side && p[1] >= 0.0 && p[1] <= HEIGHT, "{line}");
+            assert!(
+                p[0] >= 0.0
+                    && p[0] <= side
+                    && p[2] >= 0.0
+                    && p[2] <= side
+                    && p[1] >= 0.0
+                    && p[1] <= HEIGHT,
+                "{line}"
+            );
         }
     }
 }

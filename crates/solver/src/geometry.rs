@@ -18,18 +18,27 @@ pub struct Polygon {
 impl Polygon {
     /// A triangle `a, b, c`, counter-clockwise seen from its front.
     pub fn triangle(a: DVec3, b: DVec3, c: DVec3) -> Self {
-        Polygon { corners: [a, b, c, c], arity: 3 }
+        Polygon {
+            corners: [a, b, c, c],
+            arity: 3,
+        }
     }
 
     /// A quad `a, b, c, d`, counter-clockwise seen from its front. The caller guarantees it is
     /// planar and convex (see [`Polygon::is_planar_convex_quad`]).
     pub fn quad(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> Self {
-        Polygon { corners: [a, b, c, d], arity: 4 }
+        Polygon {
+            corners: [a, b, c, d],
+            arity: 4,
+        }
     }
 
     /// The same polygon moved by `offset`.
     pub fn translated(&self, offset: DVec3) -> Polygon {
-        Polygon { corners: self.corners.map(|c| c + offset), arity: self.arity }
+        Polygon {
+            corners: self.corners.map(|c| c + offset),
+            arity: self.arity,
+        }
     }
 
     /// The corners, three or four.
@@ -64,15 +73,25 @@ impl Polygon {
         if c.len() == 3 {
             return (c[0] + c[1] + c[2]) / 3.0;
         }
-        let (a1, a2) = (triangle_area(c[0], c[1], c[2]), triangle_area(c[0], c[2], c[3]));
+        let (a1, a2) = (
+            triangle_area(c[0], c[1], c[2]),
+            triangle_area(c[0], c[2], c[3]),
+        );
         let (g1, g2) = ((c[0] + c[1] + c[2]) / 3.0, (c[0] + c[2] + c[3]) / 3.0);
-        if a1 + a2 > 0.0 { (g1 * a1 + g2 * a2) / (a1 + a2) } else { (g1 + g2) * 0.5 }
+        if a1 + a2 > 0.0 {
+            (g1 * a1 + g2 * a2) / (a1 + a2)
+        } else {
+            (g1 + g2) * 0.5
+        }
     }
 
     /// Largest distance from the centroid to a corner: the radius of a bounding sphere.
     pub fn radius(&self) -> f64 {
         let g = self.centroid();
-        self.corners().iter().map(|c| c.distance(g)).fold(0.0, f64::max)
+        self.corners()
+            .iter()
+            .map(|c| c.distance(g))
+            .fold(0.0, f64::max)
     }
 
     /// The point at parameters `(u, v)` in the unit square: bilinear for a quad; for a triangle
@@ -82,7 +101,11 @@ impl Polygon {
         if self.is_quad() {
             c[0].lerp(c[1], u).lerp(c[3].lerp(c[2], u), v)
         } else {
-            let (s, t) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
+            let (s, t) = if u + v > 1.0 {
+                (1.0 - u, 1.0 - v)
+            } else {
+                (u, v)
+            };
             c[0] + (c[1] - c[0]) * s + (c[2] - c[0]) * t
         }
     }
@@ -91,14 +114,22 @@ impl Polygon {
     pub fn uniform_point(&self, u: f64, v: f64, pick: f64) -> DVec3 {
         let c = &self.corners;
         let fold = |a: DVec3, b: DVec3, d: DVec3| {
-            let (s, t) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
+            let (s, t) = if u + v > 1.0 {
+                (1.0 - u, 1.0 - v)
+            } else {
+                (u, v)
+            };
             a + (b - a) * s + (d - a) * t
         };
         if !self.is_quad() {
             return fold(c[0], c[1], c[2]);
         }
         let first = triangle_area(c[0], c[1], c[2]);
-        if pick * self.area() < first { fold(c[0], c[1], c[2]) } else { fold(c[0], c[2], c[3]) }
+        if pick * self.area() < first {
+            fold(c[0], c[1], c[2])
+        } else {
+            fold(c[0], c[2], c[3])
+        }
     }
 
     /// Quadrature over the polygon: calls `visit(point, weight)` with weights summing to 1.
@@ -125,7 +156,12 @@ impl Polygon {
             for a in 0..level {
                 for b in 0..level {
                     let (uc, vc) = ((a as f64 + 0.5) * step, (b as f64 + 0.5) * step);
-                    for (u, v) in [(uc - offset, vc - offset), (uc + offset, vc - offset), (uc - offset, vc + offset), (uc + offset, vc + offset)] {
+                    for (u, v) in [
+                        (uc - offset, vc - offset),
+                        (uc + offset, vc - offset),
+                        (uc - offset, vc + offset),
+                        (uc + offset, vc + offset),
+                    ] {
                         visit(self.point_at(u, v), jacobian(u, v) * scale);
                     }
                 }
@@ -136,7 +172,11 @@ impl Polygon {
             // Strang-Fix: barycentric (2/3, 1/6, 1/6) and its permutations, on each small
             // triangle with corners `base`, `base + d1`, `base + d2`.
             let mut rule = |base: DVec3, d1: DVec3, d2: DVec3| {
-                for (s, t) in [(1.0 / 6.0, 1.0 / 6.0), (2.0 / 3.0, 1.0 / 6.0), (1.0 / 6.0, 2.0 / 3.0)] {
+                for (s, t) in [
+                    (1.0 / 6.0, 1.0 / 6.0),
+                    (2.0 / 3.0, 1.0 / 6.0),
+                    (1.0 / 6.0, 2.0 / 3.0),
+                ] {
                     visit(base + d1 * s + d2 * t, weight);
                 }
             };
@@ -163,7 +203,11 @@ impl Polygon {
         if normal == DVec3::ZERO || diameter == 0.0 {
             return false;
         }
-        let warp = q.corners().iter().map(|p| (*p - q.centroid()).dot(normal).abs()).fold(0.0, f64::max);
+        let warp = q
+            .corners()
+            .iter()
+            .map(|p| (*p - q.centroid()).dot(normal).abs())
+            .fold(0.0, f64::max);
         let corners = q.corners();
         let turns_left = (0..4).all(|k| {
             let (p, n, nn) = (corners[k], corners[(k + 1) % 4], corners[(k + 2) % 4]);
@@ -176,7 +220,10 @@ impl Polygon {
 /// The axis-aligned box around `points` as (min corner, max corner); inverted (+inf, -inf)
 /// when there are none.
 pub fn bounds(points: impl IntoIterator<Item = DVec3>) -> (DVec3, DVec3) {
-    points.into_iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(p), hi.max(p)))
+    points.into_iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(p), hi.max(p)),
+    )
 }
 
 /// A unit direction about the unit `normal` with density `cos / pi`, from two uniform numbers
@@ -184,7 +231,10 @@ pub fn bounds(points: impl IntoIterator<Item = DVec3>) -> (DVec3, DVec3) {
 pub fn cosine_direction(normal: DVec3, u: f64, v: f64) -> DVec3 {
     let (radius, angle) = (u.sqrt(), 2.0 * PI * v);
     let (tangent, bitangent) = normal.any_orthonormal_pair();
-    (tangent * (radius * angle.cos()) + bitangent * (radius * angle.sin()) + normal * (1.0 - u).max(0.0).sqrt()).normalize()
+    (tangent * (radius * angle.cos())
+        + bitangent * (radius * angle.sin())
+        + normal * (1.0 - u).max(0.0).sqrt())
+    .normalize()
 }
 
 /// Area of the triangle `a, b, c`.
@@ -199,7 +249,12 @@ pub fn triangle_area(a: DVec3, b: DVec3, c: DVec3) -> f64 {
 /// Zero when `x` is behind `source` (one-sided emitters and receivers); the part of `source`
 /// below `x`'s tangent plane is clipped away first, so touching and perpendicular neighbours stay
 /// exact instead of blowing up like the point-to-point `cos cos / (pi r^2)` kernel.
-pub fn point_to_polygon_form_factor(x: DVec3, normal: DVec3, source: &Polygon, source_normal: DVec3) -> f64 {
+pub fn point_to_polygon_form_factor(
+    x: DVec3,
+    normal: DVec3,
+    source: &Polygon,
+    source_normal: DVec3,
+) -> f64 {
     let corners = source.corners();
     // x must be strictly in front of the source's plane, relative to its distance.
     let offset = x - corners[0];
@@ -237,7 +292,12 @@ fn lambert_polygon(x: DVec3, normal: DVec3, polygon: &[DVec3]) -> f64 {
 
 /// Sutherland-Hodgman clip of `polygon` to the half-space in front of the plane through `origin`
 /// with normal `normal`; writes the result to `out` and returns its corner count.
-fn clip_above_plane(polygon: &[DVec3], origin: DVec3, normal: DVec3, out: &mut [DVec3; 8]) -> usize {
+fn clip_above_plane(
+    polygon: &[DVec3],
+    origin: DVec3,
+    normal: DVec3,
+    out: &mut [DVec3; 8],
+) -> usize {
     let mut count = 0;
     for k in 0..polygon.len() {
         let (p, q) = (polygon[k], polygon[(k + 1) % polygon.len()]);
@@ -261,7 +321,12 @@ mod tests {
 
     fn unit_square_at_height(z: f64) -> Polygon {
         // Faces down (-z), towards a receiver below it.
-        Polygon::quad(dvec3(0.0, 0.0, z), dvec3(0.0, 1.0, z), dvec3(1.0, 1.0, z), dvec3(1.0, 0.0, z))
+        Polygon::quad(
+            dvec3(0.0, 0.0, z),
+            dvec3(0.0, 1.0, z),
+            dvec3(1.0, 1.0, z),
+            dvec3(1.0, 0.0, z),
+        )
     }
 
     #[test]
@@ -285,15 +350,26 @@ mod tests {
         let expected = (a / (1.0 + a * a).sqrt() * (b / (1.0 + a * a).sqrt()).atan()
             + b / (1.0 + b * b).sqrt() * (a / (1.0 + b * b).sqrt()).atan())
             / (2.0 * PI);
-        let f = point_to_polygon_form_factor(DVec3::ZERO, DVec3::Z, &unit_square_at_height(1.0), -DVec3::Z);
+        let f = point_to_polygon_form_factor(
+            DVec3::ZERO,
+            DVec3::Z,
+            &unit_square_at_height(1.0),
+            -DVec3::Z,
+        );
         assert!((f - expected).abs() < 1e-12, "{f} vs {expected}");
     }
 
     #[test]
     fn source_behind_receiver_or_facing_away_gives_zero() {
         let square = unit_square_at_height(1.0);
-        assert_eq!(point_to_polygon_form_factor(DVec3::ZERO, -DVec3::Z, &square, square.normal()), 0.0);
-        assert_eq!(point_to_polygon_form_factor(dvec3(0.5, 0.5, 2.0), -DVec3::Z, &square, square.normal()), 0.0);
+        assert_eq!(
+            point_to_polygon_form_factor(DVec3::ZERO, -DVec3::Z, &square, square.normal()),
+            0.0
+        );
+        assert_eq!(
+            point_to_polygon_form_factor(dvec3(0.5, 0.5, 2.0), -DVec3::Z, &square, square.normal()),
+            0.0
+        );
     }
 
     #[test]
@@ -312,14 +388,21 @@ mod tests {
             dvec3(1.0, 1.0, 1.0),
             dvec3(-1.0, 1.0, 1.0),
         );
-        let f = point_to_polygon_form_factor(DVec3::ZERO, DVec3::Z, &straddling, straddling.normal());
-        let g = point_to_polygon_form_factor(DVec3::ZERO, DVec3::Z, &upper_half, upper_half.normal());
+        let f =
+            point_to_polygon_form_factor(DVec3::ZERO, DVec3::Z, &straddling, straddling.normal());
+        let g =
+            point_to_polygon_form_factor(DVec3::ZERO, DVec3::Z, &upper_half, upper_half.normal());
         assert!(f > 0.0 && (f - g).abs() < 1e-12, "{f} vs {g}");
     }
 
     #[test]
     fn quadrature_weights_sum_to_one_and_points_lie_inside() {
-        let skewed = Polygon::quad(dvec3(0.0, 0.0, 0.0), dvec3(3.0, 0.0, 0.0), dvec3(2.0, 1.0, 0.0), dvec3(0.5, 1.0, 0.0));
+        let skewed = Polygon::quad(
+            dvec3(0.0, 0.0, 0.0),
+            dvec3(3.0, 0.0, 0.0),
+            dvec3(2.0, 1.0, 0.0),
+            dvec3(0.5, 1.0, 0.0),
+        );
         let triangle = Polygon::triangle(DVec3::ZERO, DVec3::X, DVec3::Y);
         for polygon in [skewed, triangle] {
             let points_per_cell = if polygon.is_quad() { 4 } else { 3 };
@@ -333,7 +416,10 @@ mod tests {
                 assert!((total - 1.0).abs() < 1e-12);
                 assert_eq!(count, (m * m * points_per_cell).max(1));
                 // Every level integrates linear functions exactly: the mean is the centroid.
-                assert!(mean.distance(polygon.centroid()) < 1e-12 * polygon.radius(), "m={m}");
+                assert!(
+                    mean.distance(polygon.centroid()) < 1e-12 * polygon.radius(),
+                    "m={m}"
+                );
             }
         }
     }
@@ -342,7 +428,17 @@ mod tests {
     fn planarity_and_convexity_of_quads() {
         let (a, b, c, d) = (DVec3::ZERO, DVec3::X, dvec3(1.0, 1.0, 0.0), DVec3::Y);
         assert!(Polygon::is_planar_convex_quad(a, b, c, d));
-        assert!(!Polygon::is_planar_convex_quad(a, b, dvec3(1.0, 1.0, 0.1), d));
-        assert!(!Polygon::is_planar_convex_quad(a, b, dvec3(0.2, 0.2, 0.0), d));
+        assert!(!Polygon::is_planar_convex_quad(
+            a,
+            b,
+            dvec3(1.0, 1.0, 0.1),
+            d
+        ));
+        assert!(!Polygon::is_planar_convex_quad(
+            a,
+            b,
+            dvec3(0.2, 0.2, 0.0),
+            d
+        ));
     }
 }

@@ -25,7 +25,10 @@
 //!   GMRES and Jacobi solve it. No dense matrix anywhere: memory is O(elements + links).
 
 use crate::Progress;
-use crate::form_factors::{FormFactorSettings, Transport, mutually_facing, near_pair_level, pair_seed, rays_for_pair, sees_closed_view, splitmix64, stratified_uv, unoccluded_form_factor};
+use crate::form_factors::{
+    FormFactorSettings, Transport, mutually_facing, near_pair_level, pair_seed, rays_for_pair,
+    sees_closed_view, splitmix64, stratified_uv, unoccluded_form_factor,
+};
 use crate::geometry::{Polygon, bounds, cosine_direction, point_to_polygon_form_factor};
 use crate::mesh::{Mesh, Patch};
 use crate::scene::{Rgb, Scene};
@@ -57,7 +60,11 @@ pub struct HierarchySettings {
 
 impl Default for HierarchySettings {
     fn default() -> Self {
-        HierarchySettings { error: 0.03, max_rounds: 4, max_leaves: 500_000 }
+        HierarchySettings {
+            error: 0.03,
+            max_rounds: 4,
+            max_leaves: 500_000,
+        }
     }
 }
 
@@ -224,9 +231,16 @@ pub struct Hierarchy {
 
 /// The point of `face` at lattice coordinates `at`.
 fn lattice_point(face: &Polygon, at: [u32; 2]) -> DVec3 {
-    let (u, v) = (at[0] as f64 / LATTICE_STEPS as f64, at[1] as f64 / LATTICE_STEPS as f64);
+    let (u, v) = (
+        at[0] as f64 / LATTICE_STEPS as f64,
+        at[1] as f64 / LATTICE_STEPS as f64,
+    );
     let c = face.corners();
-    if face.is_quad() { face.point_at(u, v) } else { c[0] + (c[1] - c[0]) * u + (c[2] - c[0]) * v }
+    if face.is_quad() {
+        face.point_at(u, v)
+    } else {
+        c[0] + (c[1] - c[0]) * u + (c[2] - c[0]) * v
+    }
 }
 
 fn midpoint(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
@@ -252,27 +266,44 @@ impl Shaft {
         let union = union(a, b);
         // Which box alone sets the union's face on `axis` (`high`: its max side): Some(true) a,
         // Some(false) b, None both.
-        let side = |bounds: Bounds, axis: usize, high: bool| if high { bounds.1[axis] } else { bounds.0[axis] };
+        let side = |bounds: Bounds, axis: usize, high: bool| {
+            if high { bounds.1[axis] } else { bounds.0[axis] }
+        };
         let owner = |axis: usize, high: bool| {
             let (va, vb) = (side(a, axis, high), side(b, axis, high));
-            if va == vb { None } else { Some((va > vb) == high) }
+            if va == vb {
+                None
+            } else {
+                Some((va > vb) == high)
+            }
         };
-        let mut shaft = Shaft { union, planes: [(DVec3::ZERO, 0.0); 12], count: 0, margin: 1e-9 * (union.1 - union.0).length() };
+        let mut shaft = Shaft {
+            union,
+            planes: [(DVec3::ZERO, 0.0); 12],
+            count: 0,
+            margin: 1e-9 * (union.1 - union.0).length(),
+        };
         for i in 0..3 {
             for j in i + 1..3 {
                 for high_i in [false, true] {
                     for high_j in [false, true] {
-                        let (Some(oi), Some(oj)) = (owner(i, high_i), owner(j, high_j)) else { continue };
+                        let (Some(oi), Some(oj)) = (owner(i, high_i), owner(j, high_j)) else {
+                            continue;
+                        };
                         if oi == oj {
                             continue;
                         }
                         // The plane through the (i, j) edge of a and the same edge of b, facing
                         // the union's corner they cut off.
-                        let (pa, pb) = ((side(a, i, high_i), side(a, j, high_j)), (side(b, i, high_i), side(b, j, high_j)));
+                        let (pa, pb) = (
+                            (side(a, i, high_i), side(a, j, high_j)),
+                            (side(b, i, high_i), side(b, j, high_j)),
+                        );
                         let mut normal = DVec3::ZERO;
                         normal[i] = pb.1 - pa.1;
                         normal[j] = pa.0 - pb.0;
-                        let towards_corner = normal[i] * if high_i { 1.0 } else { -1.0 } + normal[j] * if high_j { 1.0 } else { -1.0 };
+                        let towards_corner = normal[i] * if high_i { 1.0 } else { -1.0 }
+                            + normal[j] * if high_j { 1.0 } else { -1.0 };
                         if towards_corner < 0.0 {
                             normal = -normal;
                         }
@@ -301,11 +332,17 @@ impl Shaft {
     fn may_meet_points(&self, points: &[DVec3]) -> bool {
         let m = self.margin;
         for axis in 0..3 {
-            if points.iter().all(|p| p[axis] > self.union.1[axis] + m) || points.iter().all(|p| p[axis] < self.union.0[axis] - m) {
+            if points.iter().all(|p| p[axis] > self.union.1[axis] + m)
+                || points.iter().all(|p| p[axis] < self.union.0[axis] - m)
+            {
                 return false;
             }
         }
-        self.planes[..self.count].iter().all(|(normal, offset)| points.iter().any(|p| normal.dot(*p) <= offset + m * normal.length()))
+        self.planes[..self.count].iter().all(|(normal, offset)| {
+            points
+                .iter()
+                .any(|p| normal.dot(*p) <= offset + m * normal.length())
+        })
     }
 }
 
@@ -316,8 +353,14 @@ fn blocks_every_segment(blocker: &Polygon, normal: DVec3, a: &[DVec3], b: &[DVec
     let c = blocker.corners();
     let tolerance = 1e-9 * blocker.radius();
     let height = |p: &DVec3| (*p - c[0]).dot(normal);
-    let (above_a, below_a) = (a.iter().all(|p| height(p) > tolerance), a.iter().all(|p| height(p) < -tolerance));
-    let (above_b, below_b) = (b.iter().all(|p| height(p) > tolerance), b.iter().all(|p| height(p) < -tolerance));
+    let (above_a, below_a) = (
+        a.iter().all(|p| height(p) > tolerance),
+        a.iter().all(|p| height(p) < -tolerance),
+    );
+    let (above_b, below_b) = (
+        b.iter().all(|p| height(p) > tolerance),
+        b.iter().all(|p| height(p) < -tolerance),
+    );
     if !((above_a && below_b) || (below_a && above_b)) {
         return false;
     }
@@ -390,7 +433,11 @@ impl Refiner<'_> {
     fn decide(&self, receiver: u32, source: u32) -> Decision {
         let (r, s) = (self.node(receiver), self.node(source));
         if receiver == source {
-            return if r.element.is_none() { Decision::SplitBoth } else { Decision::Drop };
+            return if r.element.is_none() {
+                Decision::SplitBoth
+            } else {
+                Decision::Drop
+            };
         }
         // Clusters gather nothing themselves: one that received would hand the same irradiance
         // to every face below it, including faces that cannot see the source (light leaked
@@ -399,11 +446,21 @@ impl Refiner<'_> {
         if r.element.is_none() {
             return Decision::SplitReceiver;
         }
-        let Some(estimate) = self.estimate(receiver, source) else { return Decision::Drop };
+        let Some(estimate) = self.estimate(receiver, source) else {
+            return Decision::Drop;
+        };
         if estimate.visibility == Visibility::Hidden {
             return Decision::Drop;
         }
-        let errors = link_errors(r, (self.radiosity[source as usize], self.spread[source as usize]), estimate.factor, estimate.spread);
+        let errors = link_errors(
+            r,
+            (
+                self.radiosity[source as usize],
+                self.spread[source as usize],
+            ),
+            estimate.factor,
+            estimate.spread,
+        );
         match split_side(r, s, errors, self.tolerance, self.smallest) {
             Some(true) => return Decision::SplitReceiver,
             Some(false) => return Decision::SplitSource,
@@ -415,12 +472,24 @@ impl Refiner<'_> {
         }
         let offset = match (&s.element, estimate.visibility) {
             (Some(e), Visibility::Partial | Visibility::Clear) => {
-                let centroid = estimate.centroid.unwrap_or_else(|| kernel_centre(self.hierarchy.element_patch(receiver), &e.patch, pair_seed(receiver as usize, source as usize)));
+                let centroid = estimate.centroid.unwrap_or_else(|| {
+                    kernel_centre(
+                        self.hierarchy.element_patch(receiver),
+                        &e.patch,
+                        pair_seed(receiver as usize, source as usize),
+                    )
+                });
                 tangent_coordinates(&e.patch, centroid)
             }
             _ => [0.0; 2],
         };
-        Decision::Keep(Link { receiver, source, factor: factor as f32, spread: estimate.spread as f32, offset })
+        Decision::Keep(Link {
+            receiver,
+            source,
+            factor: factor as f32,
+            spread: estimate.spread as f32,
+            offset,
+        })
     }
 
     fn estimate(&self, receiver: u32, source: u32) -> Option<Estimate> {
@@ -448,29 +517,55 @@ impl Refiner<'_> {
             extend(at(p.centroid));
             let visibility = self.shaft_visibility(p, q);
             if visibility != Visibility::Partial {
-                return Some(Estimate { factor, spread: high - low, visibility, centroid: None });
+                return Some(Estimate {
+                    factor,
+                    spread: high - low,
+                    visibility,
+                    centroid: None,
+                });
             }
             // Partly hidden: what counts is how much visibility varies over the receiver, not
             // the whole factor (a source hidden alike from every receiver point needs no split).
             let rays_per_point = rays_for_pair(p, q, &self.rays).max(4);
-            let (occluded, least, most, centroid) = self.partly_hidden_factor(receiver, source, integration_level(p, q, factor, high - low).min(2), rays_per_point);
-            return Some(Estimate { factor: occluded, spread: high - low + factor * (most - least), visibility, centroid: Some(centroid) });
+            let (occluded, least, most, centroid) = self.partly_hidden_factor(
+                receiver,
+                source,
+                integration_level(p, q, factor, high - low).min(2),
+                rays_per_point,
+            );
+            return Some(Estimate {
+                factor: occluded,
+                spread: high - low + factor * (most - least),
+                visibility,
+                centroid: Some(centroid),
+            });
         }
         // A cluster takes part: cull by facing, then bound the factor by the source's area seen
         // from the nearest the two bounding spheres come.
         let in_front = |bounds: Bounds, e: &Element| {
             let (lo, hi) = bounds;
             (0..8).any(|k| {
-                let corner = DVec3::new(if k & 1 == 0 { lo.x } else { hi.x }, if k & 2 == 0 { lo.y } else { hi.y }, if k & 4 == 0 { lo.z } else { hi.z });
+                let corner = DVec3::new(
+                    if k & 1 == 0 { lo.x } else { hi.x },
+                    if k & 2 == 0 { lo.y } else { hi.y },
+                    if k & 4 == 0 { lo.z } else { hi.z },
+                );
                 (corner - e.patch.centroid).dot(e.patch.normal) > 0.0
             })
         };
-        if r.element.as_ref().is_some_and(|e| !in_front(s.bounds, e)) || s.element.as_ref().is_some_and(|e| !in_front(r.bounds, e)) {
+        if r.element.as_ref().is_some_and(|e| !in_front(s.bounds, e))
+            || s.element.as_ref().is_some_and(|e| !in_front(r.bounds, e))
+        {
             return None;
         }
         let gap = (r.centroid.distance(s.centroid) - r.radius - s.radius).max(0.0);
         let bound = (s.area / (PI * gap * gap)).min(1.0);
-        Some(Estimate { factor: bound, spread: bound, visibility: Visibility::Sampled, centroid: None })
+        Some(Estimate {
+            factor: bound,
+            spread: bound,
+            visibility: Visibility::Sampled,
+            centroid: None,
+        })
     }
 
     /// Clear, hidden or partial, from the faces in the shaft between `p` and `q`.
@@ -491,10 +586,18 @@ impl Refiner<'_> {
             };
             // An input face (the search never goes below them).
             let face = element.patch.face;
-            if face == p.face || face == q.face || !shaft.may_meet_points(hierarchy.faces[face as usize].corners()) {
+            if face == p.face
+                || face == q.face
+                || !shaft.may_meet_points(hierarchy.faces[face as usize].corners())
+            {
                 continue;
             }
-            if blocks_every_segment(&hierarchy.faces[face as usize], element.patch.normal, cp, cq) {
+            if blocks_every_segment(
+                &hierarchy.faces[face as usize],
+                element.patch.normal,
+                cp,
+                cq,
+            ) {
                 self.shaft_decided.fetch_add(1, Ordering::Relaxed);
                 return Visibility::Hidden;
             }
@@ -515,7 +618,9 @@ impl Refiner<'_> {
     /// The factor a kept link carries, visibility included.
     fn factor(&self, receiver: u32, source: u32, estimate: &Estimate) -> f64 {
         let (r, s) = (self.node(receiver), self.node(source));
-        let (Some(er), Some(es)) = (&r.element, &s.element) else { return self.sampled_factor(receiver, source) };
+        let (Some(er), Some(es)) = (&r.element, &s.element) else {
+            return self.sampled_factor(receiver, source);
+        };
         let (p, q) = (&er.patch, &es.patch);
         if estimate.visibility == Visibility::Partial {
             return estimate.factor;
@@ -532,10 +637,20 @@ impl Refiner<'_> {
     /// stratified source points. The weights matter: where a receiver meets a wall the kernel
     /// peaks just where nothing blocks, and `unoccluded factor x clear share` ran 16-30% low
     /// there (measured on the Cornell box, docs/ACCURACY.md).
-    fn partly_hidden_factor(&self, receiver: u32, source: u32, level: u32, rays_per_point: u32) -> (f64, f64, f64, DVec3) {
-        let (p, q) = (self.hierarchy.element_patch(receiver), self.hierarchy.element_patch(source));
+    fn partly_hidden_factor(
+        &self,
+        receiver: u32,
+        source: u32,
+        level: u32,
+        rays_per_point: u32,
+    ) -> (f64, f64, f64, DVec3) {
+        let (p, q) = (
+            self.hierarchy.element_patch(receiver),
+            self.hierarchy.element_patch(source),
+        );
         let seed = pair_seed(receiver as usize, source as usize);
-        let (mut factor, mut point, mut cast, mut least, mut most) = (0.0, 0u32, 0u64, 1.0f64, 0.0f64);
+        let (mut factor, mut point, mut cast, mut least, mut most) =
+            (0.0, 0u32, 0u64, 1.0f64, 0.0f64);
         let (mut centroid_sum, mut centroid_weight) = (DVec3::ZERO, 0.0);
         p.polygon.for_each_quadrature_point(level, |x, weight| {
             point += 1;
@@ -569,7 +684,11 @@ impl Refiner<'_> {
             }
         });
         self.rays_cast.fetch_add(cast, Ordering::Relaxed);
-        let centroid = if centroid_weight > 0.0 { centroid_sum / centroid_weight } else { q.centroid };
+        let centroid = if centroid_weight > 0.0 {
+            centroid_sum / centroid_weight
+        } else {
+            q.centroid
+        };
         (factor, least.min(most), most, centroid)
     }
 
@@ -606,7 +725,18 @@ impl Hierarchy {
         let centroids: Vec<DVec3> = scene.faces.iter().map(|f| f.polygon.centroid()).collect();
         let mut nodes: Vec<Node> = Vec::new();
         let mut face_node = vec![NONE; face_count];
-        let placeholder = Node { element: None, first_child: 0, child_count: 0, parent: NONE, area: 0.0, centroid: DVec3::ZERO, radius: 0.0, bounds: (DVec3::ZERO, DVec3::ZERO), reflectance: 0.0, faces: 0..0 };
+        let placeholder = Node {
+            element: None,
+            first_child: 0,
+            child_count: 0,
+            parent: NONE,
+            area: 0.0,
+            centroid: DVec3::ZERO,
+            radius: 0.0,
+            bounds: (DVec3::ZERO, DVec3::ZERO),
+            reflectance: 0.0,
+            faces: 0..0,
+        };
         if face_count > 0 {
             nodes.push(placeholder.clone());
         }
@@ -619,22 +749,60 @@ impl Hierarchy {
             if range.len() == 1 {
                 let face = order[range.start];
                 let f = &scene.faces[face as usize];
-                let patch = Patch { polygon: f.polygon, corners: [0; 4], face, object: f.object, area: 0.0, centroid: DVec3::ZERO, normal: f.polygon.normal(), radius: 0.0, reflectance: f.reflectance, emission: f.emission };
+                let patch = Patch {
+                    polygon: f.polygon,
+                    corners: [0; 4],
+                    face,
+                    object: f.object,
+                    area: 0.0,
+                    centroid: DVec3::ZERO,
+                    normal: f.polygon.normal(),
+                    radius: 0.0,
+                    reflectance: f.reflectance,
+                    emission: f.emission,
+                };
                 let s = LATTICE_STEPS;
-                let lattice = if f.polygon.is_quad() { [[0, 0], [s, 0], [s, s], [0, s]] } else { [[0, 0], [s, 0], [0, s], [0, s]] };
-                nodes[index as usize] = element_node(Element { patch, lattice, depth: 0, size_scale: f.polygon.radius().min(typical_radius) }, parent, faces);
+                let lattice = if f.polygon.is_quad() {
+                    [[0, 0], [s, 0], [s, s], [0, s]]
+                } else {
+                    [[0, 0], [s, 0], [0, s], [0, s]]
+                };
+                nodes[index as usize] = element_node(
+                    Element {
+                        patch,
+                        lattice,
+                        depth: 0,
+                        size_scale: f.polygon.radius().min(typical_radius),
+                    },
+                    parent,
+                    faces,
+                );
                 face_node[face as usize] = index;
                 continue;
             }
             let (lo, hi) = bounds(order[range.clone()].iter().map(|&f| centroids[f as usize]));
             let extent = hi - lo;
-            let axis = if extent.x >= extent.y && extent.x >= extent.z { 0 } else if extent.y >= extent.z { 1 } else { 2 };
+            let axis = if extent.x >= extent.y && extent.x >= extent.z {
+                0
+            } else if extent.y >= extent.z {
+                1
+            } else {
+                2
+            };
             let half = range.len() / 2;
-            order[range.clone()].select_nth_unstable_by(half, |a, b| centroids[*a as usize][axis].total_cmp(&centroids[*b as usize][axis]));
+            order[range.clone()].select_nth_unstable_by(half, |a, b| {
+                centroids[*a as usize][axis].total_cmp(&centroids[*b as usize][axis])
+            });
             let first = nodes.len() as u32;
             nodes.push(placeholder.clone());
             nodes.push(placeholder.clone());
-            nodes[index as usize] = Node { first_child: first, child_count: 2, parent, faces, ..placeholder.clone() };
+            nodes[index as usize] = Node {
+                first_child: first,
+                child_count: 2,
+                parent,
+                faces,
+                ..placeholder.clone()
+            };
             stack.push((first, range.start..range.start + half, index));
             stack.push((first + 1, range.start + half..range.end, index));
         }
@@ -643,19 +811,31 @@ impl Hierarchy {
             if nodes[i].element.is_some() {
                 continue;
             }
-            let children: Vec<Node> = nodes[i].children().map(|c| nodes[c as usize].clone()).collect();
+            let children: Vec<Node> = nodes[i]
+                .children()
+                .map(|c| nodes[c as usize].clone())
+                .collect();
             let area: f64 = children.iter().map(|c| c.area).sum();
             let centroid = children.iter().map(|c| c.centroid * c.area).sum::<DVec3>() / area;
             let node = &mut nodes[i];
             node.area = area;
             node.centroid = centroid;
-            node.bounds = children.iter().map(|c| c.bounds).reduce(union).expect("a cluster has children");
-            node.radius = children.iter().map(|c| c.centroid.distance(centroid) + c.radius).fold(0.0, f64::max);
+            node.bounds = children
+                .iter()
+                .map(|c| c.bounds)
+                .reduce(union)
+                .expect("a cluster has children");
+            node.radius = children
+                .iter()
+                .map(|c| c.centroid.distance(centroid) + c.radius)
+                .fold(0.0, f64::max);
             node.reflectance = children.iter().map(|c| c.reflectance).fold(0.0, f64::max);
         }
         let mut area_prefix = vec![0.0];
         for &f in &order {
-            area_prefix.push(area_prefix.last().copied().unwrap_or(0.0) + scene.faces[f as usize].polygon.area());
+            area_prefix.push(
+                area_prefix.last().copied().unwrap_or(0.0) + scene.faces[f as usize].polygon.area(),
+            );
         }
         let clusters = nodes.iter().filter(|n| n.element.is_none()).count();
         Hierarchy {
@@ -673,7 +853,10 @@ impl Hierarchy {
             seen_share: Vec::new(),
             seen_area: Vec::new(),
             slopes: Vec::new(),
-            stats: HierarchyStats { clusters, ..HierarchyStats::default() },
+            stats: HierarchyStats {
+                clusters,
+                ..HierarchyStats::default()
+            },
         }
     }
 
@@ -684,7 +867,11 @@ impl Hierarchy {
 
     /// The patch of node `n`, which must be an element (a leaf, a face or a piece of one).
     fn element_patch(&self, n: u32) -> &Patch {
-        &self.nodes[n as usize].element.as_ref().expect("an element, not a cluster").patch
+        &self.nodes[n as usize]
+            .element
+            .as_ref()
+            .expect("an element, not a cluster")
+            .patch
     }
 
     /// Whether node `n` is an element not split yet: splitting it adds three leaves.
@@ -705,18 +892,53 @@ impl Hierarchy {
         let l = element.lattice;
         let children: [[[u32; 2]; 4]; 4] = if face.is_quad() {
             let centre = midpoint(l[0], l[2]);
-            let (m01, m12, m23, m30) = (midpoint(l[0], l[1]), midpoint(l[1], l[2]), midpoint(l[2], l[3]), midpoint(l[3], l[0]));
-            [[l[0], m01, centre, m30], [m01, l[1], m12, centre], [centre, m12, l[2], m23], [m30, centre, m23, l[3]]]
+            let (m01, m12, m23, m30) = (
+                midpoint(l[0], l[1]),
+                midpoint(l[1], l[2]),
+                midpoint(l[2], l[3]),
+                midpoint(l[3], l[0]),
+            );
+            [
+                [l[0], m01, centre, m30],
+                [m01, l[1], m12, centre],
+                [centre, m12, l[2], m23],
+                [m30, centre, m23, l[3]],
+            ]
         } else {
-            let (ab, bc, ca) = (midpoint(l[0], l[1]), midpoint(l[1], l[2]), midpoint(l[2], l[0]));
-            [[l[0], ab, ca, ca], [ab, l[1], bc, bc], [ca, bc, l[2], l[2]], [ab, bc, ca, ca]]
+            let (ab, bc, ca) = (
+                midpoint(l[0], l[1]),
+                midpoint(l[1], l[2]),
+                midpoint(l[2], l[0]),
+            );
+            [
+                [l[0], ab, ca, ca],
+                [ab, l[1], bc, bc],
+                [ca, bc, l[2], l[2]],
+                [ab, bc, ca, ca],
+            ]
         };
         let first = self.nodes.len() as u32;
         for lattice in children {
             let p = lattice.map(|at| lattice_point(face, at));
-            let polygon = if face.is_quad() { Polygon::quad(p[0], p[1], p[2], p[3]) } else { Polygon::triangle(p[0], p[1], p[2]) };
-            let patch = Patch { polygon, ..element.patch };
-            self.nodes.push(element_node(Element { patch, lattice, depth: element.depth + 1, size_scale: element.size_scale }, n, faces.clone()));
+            let polygon = if face.is_quad() {
+                Polygon::quad(p[0], p[1], p[2], p[3])
+            } else {
+                Polygon::triangle(p[0], p[1], p[2])
+            };
+            let patch = Patch {
+                polygon,
+                ..element.patch
+            };
+            self.nodes.push(element_node(
+                Element {
+                    patch,
+                    lattice,
+                    depth: element.depth + 1,
+                    size_scale: element.size_scale,
+                },
+                n,
+                faces.clone(),
+            ));
         }
         let node = &mut self.nodes[n as usize];
         node.first_child = first;
@@ -733,8 +955,10 @@ impl Hierarchy {
         }
         let pick = (splitmix64(seed ^ k as u64) >> 11) as f64 / (1u64 << 53) as f64;
         let (start, end) = (node.faces.start as usize, node.faces.end as usize);
-        let target = self.area_prefix[start] + pick * (self.area_prefix[end] - self.area_prefix[start]);
-        let position = (start + self.area_prefix[start + 1..=end].partition_point(|&c| c < target)).min(end - 1);
+        let target =
+            self.area_prefix[start] + pick * (self.area_prefix[end] - self.area_prefix[start]);
+        let position = (start + self.area_prefix[start + 1..=end].partition_point(|&c| c < target))
+            .min(end - 1);
         let face = self.order[position];
         let polygon = &self.faces[face as usize];
         (polygon.uniform_point(u, v, pick), polygon.normal(), face)
@@ -743,14 +967,34 @@ impl Hierarchy {
     /// Links from `pending` pairs, refined until every kept one is accurate enough. Past
     /// `max_leaves` it marks the budget reached and then stops at once if `abandon`, else goes on
     /// without element splits.
-    fn refine(&mut self, refiner_state: (Vec<f64>, Vec<f64>, f64, f64), occluders: &Occluders, rays: FormFactorSettings, mut pending: Vec<(u32, u32)>, (max_leaves, abandon): (usize, bool)) -> (u64, u64) {
+    fn refine(
+        &mut self,
+        refiner_state: (Vec<f64>, Vec<f64>, f64, f64),
+        occluders: &Occluders,
+        rays: FormFactorSettings,
+        mut pending: Vec<(u32, u32)>,
+        (max_leaves, abandon): (usize, bool),
+    ) -> (u64, u64) {
         let (mut radiosity, mut spread, tolerance, smallest) = refiner_state;
         let (mut rays_cast, mut shaft_decided) = (0, 0);
         let mut leaves = self.leaves.len();
         while !pending.is_empty() {
             let mut decide = |pairs: &[(u32, u32)], frozen: bool| {
-                let refiner = Refiner { hierarchy: self, occluders, rays, radiosity: &radiosity, spread: &spread, tolerance, smallest: smallest_while(frozen, smallest), rays_cast: AtomicU64::new(0), shaft_decided: AtomicU64::new(0) };
-                let decisions: Vec<Decision> = pairs.par_iter().map(|&(r, s)| refiner.decide(r, s)).collect();
+                let refiner = Refiner {
+                    hierarchy: self,
+                    occluders,
+                    rays,
+                    radiosity: &radiosity,
+                    spread: &spread,
+                    tolerance,
+                    smallest: smallest_while(frozen, smallest),
+                    rays_cast: AtomicU64::new(0),
+                    shaft_decided: AtomicU64::new(0),
+                };
+                let decisions: Vec<Decision> = pairs
+                    .par_iter()
+                    .map(|&(r, s)| refiner.decide(r, s))
+                    .collect();
                 rays_cast += refiner.rays_cast.into_inner();
                 shaft_decided += refiner.shaft_decided.into_inner();
                 decisions
@@ -767,7 +1011,10 @@ impl Hierarchy {
                 } else {
                     // Over budget: the pairs that asked for element splits decide again without them.
                     let pairs: Vec<(u32, u32)> = splits.iter().map(|&i| pending[i]).collect();
-                    splits.iter().zip(decide(&pairs, true)).for_each(|(&i, decision)| decisions[i] = decision);
+                    splits
+                        .iter()
+                        .zip(decide(&pairs, true))
+                        .for_each(|(&i, decision)| decisions[i] = decision);
                     self.stats.leaf_budget_reached = true;
                 }
             }
@@ -786,7 +1033,11 @@ impl Hierarchy {
                     }
                     Decision::SplitBoth => {
                         let children = self.nodes[r as usize].children();
-                        next.extend(children.clone().flat_map(|a| children.clone().map(move |b| (a, b))));
+                        next.extend(
+                            children
+                                .clone()
+                                .flat_map(|a| children.clone().map(move |b| (a, b))),
+                        );
                     }
                 }
             }
@@ -797,7 +1048,11 @@ impl Hierarchy {
 
     /// Which of `decisions` (for `pending`) split a leaf element, and how many leaves those
     /// splits add.
-    fn element_splits(&self, pending: &[(u32, u32)], decisions: &[Decision]) -> (Vec<usize>, usize) {
+    fn element_splits(
+        &self,
+        pending: &[(u32, u32)],
+        decisions: &[Decision],
+    ) -> (Vec<usize>, usize) {
         let mut marked = vec![false; self.nodes.len()];
         let (mut indices, mut added) = (Vec::new(), 0);
         for (i, (&(r, s), decision)) in pending.iter().zip(decisions).enumerate() {
@@ -834,7 +1089,12 @@ impl Hierarchy {
         let mut low = vec![f64::INFINITY; self.nodes.len()];
         let mut high = vec![0.0f64; self.nodes.len()];
         // A buried leaf sends nothing anyone gathers: its value is no spread of the source.
-        for (i, &leaf) in self.leaves.iter().enumerate().filter(|(_, leaf)| self.seen_area[**leaf as usize] > 0.0) {
+        for (i, &leaf) in self
+            .leaves
+            .iter()
+            .enumerate()
+            .filter(|(_, leaf)| self.seen_area[**leaf as usize] > 0.0)
+        {
             let b = leaf_radiosity[i].max_element();
             (low[leaf as usize], high[leaf as usize]) = (b, b);
         }
@@ -844,7 +1104,11 @@ impl Hierarchy {
                 high[n] = high[n].max(high[c as usize]);
             }
         }
-        let spread = high.iter().zip(&low).map(|(h, l)| (h - l).max(0.0)).collect();
+        let spread = high
+            .iter()
+            .zip(&low)
+            .map(|(h, l)| (h - l).max(0.0))
+            .collect();
         (mean.iter().map(|b| b.max_element()).collect(), spread)
     }
 
@@ -861,7 +1125,9 @@ impl Hierarchy {
         for n in (0..self.nodes.len()).rev() {
             let node = &self.nodes[n];
             if node.child_count > 0 && self.seen_area[n] > 0.0 {
-                let sum = node.children().fold(Rgb::ZERO, |sum, c| sum + node_radiosity[c as usize] * self.seen_area[c as usize]);
+                let sum = node.children().fold(Rgb::ZERO, |sum, c| {
+                    sum + node_radiosity[c as usize] * self.seen_area[c as usize]
+                });
                 node_radiosity[n] = sum / self.seen_area[n];
             }
         }
@@ -890,7 +1156,9 @@ impl Hierarchy {
     /// Where link `offset` reads its source's model: from the centre, within the reach.
     fn reading_point(&self, source: u32, offset: [f32; 2]) -> [f32; 2] {
         let slope = &self.slopes[source as usize];
-        [0, 1].map(|k| (offset[k] as f64 + slope.shift[k]).clamp(-slope.reach[k], slope.reach[k]) as f32)
+        [0, 1].map(|k| {
+            (offset[k] as f64 + slope.shift[k]).clamp(-slope.reach[k], slope.reach[k]) as f32
+        })
     }
 
     /// The weighted least-squares slope of each element node's children's means (weights: their
@@ -900,25 +1168,46 @@ impl Hierarchy {
             .into_par_iter()
             .map(|n| {
                 let node = &self.nodes[n];
-                let (Some(element), true) = (&node.element, self.seen_area[n] > 0.0) else { return Slope::default() };
+                let (Some(element), true) = (&node.element, self.seen_area[n] > 0.0) else {
+                    return Slope::default();
+                };
                 let (tangent, bitangent) = element.patch.normal.any_orthonormal_pair();
                 let frame = |p: DVec3| [p.dot(tangent), p.dot(bitangent)];
-                let children: Vec<(f64, DVec3)> = node.children().map(|c| (self.seen_area[c as usize], self.nodes[c as usize].centroid)).collect();
-                let mean_centre = children.iter().map(|(w, c)| *c * *w).sum::<DVec3>() / self.seen_area[n];
-                let offsets: Vec<[f64; 2]> = children.iter().map(|(_, c)| frame(*c - mean_centre)).collect();
+                let children: Vec<(f64, DVec3)> = node
+                    .children()
+                    .map(|c| (self.seen_area[c as usize], self.nodes[c as usize].centroid))
+                    .collect();
+                let mean_centre =
+                    children.iter().map(|(w, c)| *c * *w).sum::<DVec3>() / self.seen_area[n];
+                let offsets: Vec<[f64; 2]> = children
+                    .iter()
+                    .map(|(_, c)| frame(*c - mean_centre))
+                    .collect();
                 let (mut m00, mut m01, mut m11) = (0.0, 0.0, 0.0);
                 for ((w, _), d) in children.iter().zip(&offsets) {
-                    (m00, m01, m11) = (m00 + w * d[0] * d[0], m01 + w * d[0] * d[1], m11 + w * d[1] * d[1]);
+                    (m00, m01, m11) = (
+                        m00 + w * d[0] * d[0],
+                        m01 + w * d[0] * d[1],
+                        m11 + w * d[1] * d[1],
+                    );
                 }
                 let determinant = m00 * m11 - m01 * m01;
                 if determinant <= 1e-9 * (m00 + m11) * (m00 + m11) {
                     return Slope::default();
                 }
-                let reach = [0, 1].map(|k| 0.5 * offsets.iter().map(|d| d[k].abs()).fold(0.0, f64::max));
-                let mut slope = Slope { shift: frame(node.centroid - mean_centre), reach, ..Slope::default() };
+                let reach =
+                    [0, 1].map(|k| 0.5 * offsets.iter().map(|d| d[k].abs()).fold(0.0, f64::max));
+                let mut slope = Slope {
+                    shift: frame(node.centroid - mean_centre),
+                    reach,
+                    ..Slope::default()
+                };
                 for (k, ((w, _), d)) in children.iter().zip(&offsets).enumerate() {
                     // (M^-1 w d): the slope is linear in the children's means.
-                    slope.child_weights[k] = [w * (m11 * d[0] - m01 * d[1]) / determinant, w * (m00 * d[1] - m01 * d[0]) / determinant];
+                    slope.child_weights[k] = [
+                        w * (m11 * d[0] - m01 * d[1]) / determinant,
+                        w * (m00 * d[1] - m01 * d[0]) / determinant,
+                    ];
                 }
                 slope
             })
@@ -928,7 +1217,12 @@ impl Hierarchy {
     /// Measures the leaves not measured yet and sums the reached area up the trees.
     fn measure_seen_area(&mut self, occluders: &Occluders) {
         self.seen_share.resize(self.nodes.len(), f64::NAN);
-        let unmeasured: Vec<u32> = self.leaves.iter().copied().filter(|&n| self.seen_share[n as usize].is_nan()).collect();
+        let unmeasured: Vec<u32> = self
+            .leaves
+            .iter()
+            .copied()
+            .filter(|&n| self.seen_share[n as usize].is_nan())
+            .collect();
         let shares: Vec<f64> = unmeasured
             .par_iter()
             .map(|&n| {
@@ -949,10 +1243,14 @@ impl Hierarchy {
         }
         self.seen_area = vec![0.0; self.nodes.len()];
         for &leaf in &self.leaves {
-            self.seen_area[leaf as usize] = self.nodes[leaf as usize].area * self.seen_share[leaf as usize];
+            self.seen_area[leaf as usize] =
+                self.nodes[leaf as usize].area * self.seen_share[leaf as usize];
         }
         for n in (0..self.nodes.len()).rev() {
-            let reached: f64 = self.nodes[n].children().map(|c| self.seen_area[c as usize]).sum();
+            let reached: f64 = self.nodes[n]
+                .children()
+                .map(|c| self.seen_area[c as usize])
+                .sum();
             self.seen_area[n] += reached;
         }
     }
@@ -986,7 +1284,11 @@ impl Hierarchy {
         let mut incoming = vec![(0u32, 0f32, [0f32; 2]); self.links.len()];
         for link in &self.links {
             let slot = &mut cursor[link.receiver as usize];
-            incoming[*slot as usize] = (link.source, link.factor, self.reading_point(link.source, link.offset));
+            incoming[*slot as usize] = (
+                link.source,
+                link.factor,
+                self.reading_point(link.source, link.offset),
+            );
             *slot += 1;
         }
         self.offsets = offsets;
@@ -1015,7 +1317,10 @@ impl Hierarchy {
         let mut mesh = Mesh::default();
         let mut corner_ids: HashMap<(u32, [u32; 2]), u32> = HashMap::new();
         for &leaf in &self.leaves {
-            let element = self.nodes[leaf as usize].element.as_ref().expect("leaves are elements");
+            let element = self.nodes[leaf as usize]
+                .element
+                .as_ref()
+                .expect("leaves are elements");
             let face = element.patch.face;
             let count = element.patch.polygon.corners().len();
             let mut corners = [0u32; 4];
@@ -1028,21 +1333,46 @@ impl Hierarchy {
             if count == 3 {
                 corners[3] = corners[2];
             }
-            mesh.patches.push(Patch { corners, ..element.patch });
+            mesh.patches.push(Patch {
+                corners,
+                ..element.patch
+            });
         }
         mesh
     }
 
     /// Solves for the leaves' `emission` (one per leaf) from `initial`.
-    pub fn solve(&self, emission: &[Rgb], initial: Option<&[Rgb]>, settings: &SolverSettings, progress: &(dyn Fn(Progress) + Sync)) -> Result<SolveOutcome, NeedsEntries> {
-        let reflectance: Vec<Rgb> = (0..self.leaves.len()).map(|i| self.leaf_patch(i).reflectance).collect();
-        let area: Vec<f64> = (0..self.leaves.len()).map(|i| self.leaf_patch(i).area).collect();
-        solve(self, &System { reflectance: &reflectance, emission, area: &area }, settings, initial, progress)
+    pub fn solve(
+        &self,
+        emission: &[Rgb],
+        initial: Option<&[Rgb]>,
+        settings: &SolverSettings,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<SolveOutcome, NeedsEntries> {
+        let reflectance: Vec<Rgb> = (0..self.leaves.len())
+            .map(|i| self.leaf_patch(i).reflectance)
+            .collect();
+        let area: Vec<f64> = (0..self.leaves.len())
+            .map(|i| self.leaf_patch(i).area)
+            .collect();
+        solve(
+            self,
+            &System {
+                reflectance: &reflectance,
+                emission,
+                area: &area,
+            },
+            settings,
+            initial,
+            progress,
+        )
     }
 
     /// The leaves' emission, W/m^2.
     pub fn leaf_emission(&self) -> Vec<Rgb> {
-        (0..self.leaves.len()).map(|i| self.leaf_patch(i).emission).collect()
+        (0..self.leaves.len())
+            .map(|i| self.leaf_patch(i).emission)
+            .collect()
     }
 
     /// Builds the hierarchy of `scene`: refines on an estimate, then, up to
@@ -1075,15 +1405,33 @@ impl Hierarchy {
         let (mut power, mut reflected, mut total_area) = (Rgb::ZERO, Rgb::ZERO, 0.0);
         for f in &scene.faces {
             let a = f.polygon.area();
-            (power, reflected, total_area) = (power + f.emission * a, reflected + f.reflectance * a, total_area + a);
+            (power, reflected, total_area) = (
+                power + f.emission * a,
+                reflected + f.reflectance * a,
+                total_area + a,
+            );
         }
         let total_area = total_area.max(f64::MIN_POSITIVE);
-        let ambient = power / (total_area * (Rgb::ONE - reflected / total_area).max(Rgb::splat(1e-3)));
-        let mut radiosity: Vec<Rgb> = (0..hierarchy.leaves.len()).map(|i| hierarchy.leaf_patch(i).emission + hierarchy.leaf_patch(i).reflectance * ambient).collect();
-        let mut pending = if hierarchy.nodes.is_empty() { Vec::new() } else { vec![(0, 0)] };
+        let ambient =
+            power / (total_area * (Rgb::ONE - reflected / total_area).max(Rgb::splat(1e-3)));
+        let mut radiosity: Vec<Rgb> = (0..hierarchy.leaves.len())
+            .map(|i| {
+                hierarchy.leaf_patch(i).emission + hierarchy.leaf_patch(i).reflectance * ambient
+            })
+            .collect();
+        let mut pending = if hierarchy.nodes.is_empty() {
+            Vec::new()
+        } else {
+            vec![(0, 0)]
+        };
         for round in 0..settings.max_rounds.max(1) {
             if round > 0 {
-                let solved = hierarchy.solve(&hierarchy.leaf_emission(), Some(&radiosity), solver, progress)?;
+                let solved = hierarchy.solve(
+                    &hierarchy.leaf_emission(),
+                    Some(&radiosity),
+                    solver,
+                    progress,
+                )?;
                 hierarchy.stats.refinement_iterations += solved.iterations;
                 radiosity = solved.radiosity;
             }
@@ -1094,10 +1442,21 @@ impl Hierarchy {
                 // those that can still be split count as changes.
                 let node = |n: u32| &hierarchy.nodes[n as usize];
                 let smallest = smallest_while(hierarchy.stats.leaf_budget_reached, smallest);
-                let (redo, keep): (Vec<Link>, Vec<Link>) = hierarchy.links.par_iter().partition(|l| {
-                    let source = (node_radiosity[l.source as usize], node_spread[l.source as usize]);
-                    split_side(node(l.receiver), node(l.source), link_errors(node(l.receiver), source, l.factor as f64, l.spread as f64), tolerance, smallest).is_some()
-                });
+                let (redo, keep): (Vec<Link>, Vec<Link>) =
+                    hierarchy.links.par_iter().partition(|l| {
+                        let source = (
+                            node_radiosity[l.source as usize],
+                            node_spread[l.source as usize],
+                        );
+                        split_side(
+                            node(l.receiver),
+                            node(l.source),
+                            link_errors(node(l.receiver), source, l.factor as f64, l.spread as f64),
+                            tolerance,
+                            smallest,
+                        )
+                        .is_some()
+                    });
                 if redo.is_empty() {
                     break;
                 }
@@ -1105,12 +1464,28 @@ impl Hierarchy {
                 pending = redo.iter().map(|l| (l.receiver, l.source)).collect();
             }
             let (before, mut inherited) = (hierarchy.nodes.len(), hierarchy.pull(&radiosity));
-            let (rays_cast, shaft_decided) = hierarchy.refine((node_radiosity, node_spread, tolerance, smallest), occluders, rays, std::mem::take(&mut pending), (settings.max_leaves, abandon));
+            let (rays_cast, shaft_decided) = hierarchy.refine(
+                (node_radiosity, node_spread, tolerance, smallest),
+                occluders,
+                rays,
+                std::mem::take(&mut pending),
+                (settings.max_leaves, abandon),
+            );
             hierarchy.stats.rays += rays_cast;
             hierarchy.stats.shaft_decided += shaft_decided;
             hierarchy.stats.rounds = round + 1;
             if abandon && hierarchy.stats.leaf_budget_reached {
-                return Hierarchy::build(scene, occluders, &HierarchySettings { error: 2.0 * settings.error, ..*settings }, rays, solver, progress);
+                return Hierarchy::build(
+                    scene,
+                    occluders,
+                    &HierarchySettings {
+                        error: 2.0 * settings.error,
+                        ..*settings
+                    },
+                    rays,
+                    solver,
+                    progress,
+                );
             }
             // New leaves start from their parent's value.
             inherited.resize(hierarchy.nodes.len(), Rgb::ZERO);
@@ -1118,7 +1493,11 @@ impl Hierarchy {
                 inherited[n] = inherited[hierarchy.nodes[n].parent as usize];
             }
             hierarchy.index(occluders);
-            radiosity = hierarchy.leaves.iter().map(|&n| inherited[n as usize]).collect();
+            radiosity = hierarchy
+                .leaves
+                .iter()
+                .map(|&n| inherited[n as usize])
+                .collect();
         }
         hierarchy.stats.knob_used = settings.error;
         Ok((hierarchy, radiosity))
@@ -1128,10 +1507,19 @@ impl Hierarchy {
 /// Mean over the reached area of the leaves of the largest channel of reflected radiosity
 /// (`B - E`): the scale errors are measured against, which a small bright lamp does not inflate.
 fn mean_reflected(hierarchy: &Hierarchy, radiosity: &[Rgb]) -> f64 {
-    let (sum, area) = radiosity.iter().enumerate().fold((0.0, 0.0), |(sum, area), (i, b)| {
-        let (patch, reached) = (hierarchy.leaf_patch(i), hierarchy.seen_area[hierarchy.leaves[i] as usize]);
-        (sum + (*b - patch.emission).max(Rgb::ZERO).max_element() * reached, area + reached)
-    });
+    let (sum, area) = radiosity
+        .iter()
+        .enumerate()
+        .fold((0.0, 0.0), |(sum, area), (i, b)| {
+            let (patch, reached) = (
+                hierarchy.leaf_patch(i),
+                hierarchy.seen_area[hierarchy.leaves[i] as usize],
+            );
+            (
+                sum + (*b - patch.emission).max(Rgb::ZERO).max_element() * reached,
+                area + reached,
+            )
+        });
     if area > 0.0 { sum / area } else { 0.0 }
 }
 
@@ -1139,8 +1527,16 @@ fn mean_reflected(hierarchy: &Hierarchy, radiosity: &[Rgb]) -> f64 {
 /// radiosity: `rho_R B_S dF` from the factor's spread over the receiver (only splitting the
 /// receiver reduces it) and `rho_R F dB_S` from the source's own spread (only splitting the
 /// source does).
-fn link_errors(receiver: &Node, (radiosity, radiosity_spread): (f64, f64), factor: f64, spread: f64) -> (f64, f64) {
-    (receiver.reflectance * radiosity * spread, receiver.reflectance * factor * radiosity_spread)
+fn link_errors(
+    receiver: &Node,
+    (radiosity, radiosity_spread): (f64, f64),
+    factor: f64,
+    spread: f64,
+) -> (f64, f64) {
+    (
+        receiver.reflectance * radiosity * spread,
+        receiver.reflectance * factor * radiosity_spread,
+    )
 }
 
 /// Which end of a link to split: `Some(true)` the receiver, `Some(false)` the source, `None`
@@ -1150,14 +1546,28 @@ fn link_errors(receiver: &Node, (radiosity, radiosity_spread): (f64, f64), facto
 /// with the larger error splits, or the other if that one is at the smallest size and its own
 /// error still exceeds the `tolerance`. With a cluster at either end, whose factor is only a
 /// bound or a sample, the larger end is split.
-fn split_side(r: &Node, s: &Node, (receiver_error, source_error): (f64, f64), tolerance: f64, smallest: f64) -> Option<bool> {
-    let can_split = |n: &Node| n.element.as_ref().is_none_or(|e| n.radius > smallest * e.size_scale && e.depth < MAX_DEPTH);
+fn split_side(
+    r: &Node,
+    s: &Node,
+    (receiver_error, source_error): (f64, f64),
+    tolerance: f64,
+    smallest: f64,
+) -> Option<bool> {
+    let can_split = |n: &Node| {
+        n.element
+            .as_ref()
+            .is_none_or(|e| n.radius > smallest * e.size_scale && e.depth < MAX_DEPTH)
+    };
     if receiver_error + source_error <= tolerance {
         return None;
     }
     if r.element.is_some() && s.element.is_some() {
         let receiver_first = receiver_error >= source_error;
-        let (first, second, second_error) = if receiver_first { (r, s, source_error) } else { (s, r, receiver_error) };
+        let (first, second, second_error) = if receiver_first {
+            (r, s, source_error)
+        } else {
+            (s, r, receiver_error)
+        };
         return if can_split(first) {
             Some(receiver_first)
         } else {
@@ -1211,7 +1621,9 @@ fn tangent_coordinates(patch: &Patch, point: DVec3) -> [f32; 2] {
 fn is_buried(x: DVec3, patch: &Patch, occluders: &Occluders, seed: u64) -> bool {
     (0..BURIED_RAYS).all(|k| {
         let (u, v) = stratified_uv(k, seed);
-        occluders.closest_hit(x, cosine_direction(patch.normal, u, v), patch.face).is_some_and(|hit| !hit.front)
+        occluders
+            .closest_hit(x, cosine_direction(patch.normal, u, v), patch.face)
+            .is_some_and(|hit| !hit.front)
     })
 }
 
@@ -1246,7 +1658,8 @@ fn smallest_scale(scene: &Scene) -> f64 {
 /// A node for element `e` under `parent`.
 fn element_node(mut e: Element, parent: u32, faces: Range<u32>) -> Node {
     let polygon = e.patch.polygon;
-    (e.patch.area, e.patch.centroid, e.patch.radius) = (polygon.area(), polygon.centroid(), polygon.radius());
+    (e.patch.area, e.patch.centroid, e.patch.radius) =
+        (polygon.area(), polygon.centroid(), polygon.radius());
     Node {
         first_child: 0,
         child_count: 0,
@@ -1303,19 +1716,45 @@ mod tests {
 
     fn closed_cube() -> Scene {
         let mut scene = Scene::default();
-        let material = Material { reflectance: Rgb::splat(0.5), emission: Rgb::ONE };
+        let material = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ONE,
+        };
         let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
-        for (origin, u, v) in [(DVec3::ZERO, z, x), (y, x, z), (DVec3::ZERO, y, z), (x, z, y), (DVec3::ZERO, x, y), (z, y, x)] {
+        for (origin, u, v) in [
+            (DVec3::ZERO, z, x),
+            (y, x, z),
+            (DVec3::ZERO, y, z),
+            (x, z, y),
+            (DVec3::ZERO, x, y),
+            (z, y, x),
+        ] {
             let object = scene.add_object("wall");
-            scene.add_polygon(object, &[origin, origin + u, origin + u + v, origin + v], material);
+            scene.add_polygon(
+                object,
+                &[origin, origin + u, origin + u + v, origin + v],
+                material,
+            );
         }
         scene
     }
 
     fn build(scene: &Scene, error: f64) -> Hierarchy {
         let occluders = Occluders::new(scene);
-        let settings = HierarchySettings { error, ..HierarchySettings::default() };
-        Hierarchy::build(scene, &occluders, &settings, FormFactorSettings::default(), &SolverSettings::default(), &crate::no_progress).expect("gmres needs no entries").0
+        let settings = HierarchySettings {
+            error,
+            ..HierarchySettings::default()
+        };
+        Hierarchy::build(
+            scene,
+            &occluders,
+            &settings,
+            FormFactorSettings::default(),
+            &SolverSettings::default(),
+            &crate::no_progress,
+        )
+        .expect("gmres needs no entries")
+        .0
     }
 
     #[test]
@@ -1326,9 +1765,20 @@ mod tests {
             assert!(hierarchy.face_closed.iter().all(|c| *c));
             let mut sums = vec![Rgb::ZERO; hierarchy.leaves.len()];
             hierarchy.gather(&vec![Rgb::ONE; hierarchy.leaves.len()], &mut sums);
-            let worst = sums.iter().zip(&hierarchy.row_scale).map(|(s, k)| (s.x / k - 1.0).abs()).fold(0.0, f64::max);
-            println!("error {error}: {} leaves, {} links, worst raw row sum off by {worst:.4}", hierarchy.leaves.len(), hierarchy.links.len());
-            assert!(worst < 2.0 * error, "error {error}: worst row sum off by {worst}");
+            let worst = sums
+                .iter()
+                .zip(&hierarchy.row_scale)
+                .map(|(s, k)| (s.x / k - 1.0).abs())
+                .fold(0.0, f64::max);
+            println!(
+                "error {error}: {} leaves, {} links, worst raw row sum off by {worst:.4}",
+                hierarchy.leaves.len(),
+                hierarchy.links.len()
+            );
+            assert!(
+                worst < 2.0 * error,
+                "error {error}: worst row sum off by {worst}"
+            );
         }
     }
 
@@ -1336,21 +1786,42 @@ mod tests {
     /// on the floor over [1, 2] x [1, 2]: lattice lines of the floor at depth 2.
     fn room_with_a_box() -> Scene {
         let mut scene = Scene::default();
-        let grey = Material { reflectance: Rgb::splat(0.5), emission: Rgb::ZERO };
-        let lamp = Material { reflectance: Rgb::splat(0.5), emission: Rgb::ONE };
+        let grey = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        let lamp = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ONE,
+        };
         let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
         let mut add = |name: &str, origin: DVec3, u: DVec3, v: DVec3, material: Material| {
             let object = scene.add_object(name);
-            scene.add_polygon(object, &[origin, origin + u, origin + u + v, origin + v], material);
+            scene.add_polygon(
+                object,
+                &[origin, origin + u, origin + u + v, origin + v],
+                material,
+            );
         };
         let s = 4.0;
         add("floor", DVec3::ZERO, z * s, x * s, grey);
         add("ceiling", y * s, x * s, z * s, lamp);
-        for (origin, u, v) in [(DVec3::ZERO, y * s, z * s), (x * s, z * s, y * s), (DVec3::ZERO, x * s, y * s), (z * s, y * s, x * s)] {
+        for (origin, u, v) in [
+            (DVec3::ZERO, y * s, z * s),
+            (x * s, z * s, y * s),
+            (DVec3::ZERO, x * s, y * s),
+            (z * s, y * s, x * s),
+        ] {
             add("wall", origin, u, v, grey);
         }
         let o = dvec3(1.0, 0.0, 1.0);
-        for (origin, u, v) in [(o + y, z, x), (o, z, y), (o + x, y, z), (o, y, x), (o + z, x, y)] {
+        for (origin, u, v) in [
+            (o + y, z, x),
+            (o, z, y),
+            (o + x, y, z),
+            (o, y, x),
+            (o + z, x, y),
+        ] {
             add("box", origin, u, v, grey);
         }
         scene
@@ -1362,11 +1833,22 @@ mod tests {
         let hierarchy = build(&scene, 0.1);
         let floor = hierarchy.face_node[0] as usize;
         let floor_area = hierarchy.nodes[floor].area;
-        println!("floor reached area {} of {floor_area}", hierarchy.seen_area[floor]);
-        assert!((hierarchy.seen_area[floor] - (floor_area - 1.0)).abs() < 1e-9, "{}", hierarchy.seen_area[floor]);
+        println!(
+            "floor reached area {} of {floor_area}",
+            hierarchy.seen_area[floor]
+        );
+        assert!(
+            (hierarchy.seen_area[floor] - (floor_area - 1.0)).abs() < 1e-9,
+            "{}",
+            hierarchy.seen_area[floor]
+        );
         for (face, &n) in hierarchy.face_node.iter().enumerate().skip(1) {
             let node = n as usize;
-            assert!((hierarchy.seen_area[node] - hierarchy.nodes[node].area).abs() < 1e-9, "face {face}: {}", hierarchy.seen_area[node]);
+            assert!(
+                (hierarchy.seen_area[node] - hierarchy.nodes[node].area).abs() < 1e-9,
+                "face {face}: {}",
+                hierarchy.seen_area[node]
+            );
         }
     }
 
@@ -1374,28 +1856,64 @@ mod tests {
     fn a_large_floor_refines_to_the_scale_of_what_stands_on_it() {
         // A 20 m floor, a 1 m box on it and a 1 m lamp above: the median face is the box's.
         let mut scene = Scene::default();
-        let grey = Material { reflectance: Rgb::splat(0.5), emission: Rgb::ZERO };
+        let grey = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
         let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
         let mut add = |origin: DVec3, u: DVec3, v: DVec3, material: Material| {
             let object = scene.add_object("part");
-            scene.add_polygon(object, &[origin, origin + u, origin + u + v, origin + v], material);
+            scene.add_polygon(
+                object,
+                &[origin, origin + u, origin + u + v, origin + v],
+                material,
+            );
         };
         add(DVec3::ZERO, z * 20.0, x * 20.0, grey);
         let o = dvec3(9.5, 0.0, 9.5);
-        for (origin, u, v) in [(o + y, z, x), (o, z, y), (o + x, y, z), (o, y, x), (o + z, x, y)] {
+        for (origin, u, v) in [
+            (o + y, z, x),
+            (o, z, y),
+            (o + x, y, z),
+            (o, y, x),
+            (o + z, x, y),
+        ] {
             add(origin, u, v, grey);
         }
-        add(dvec3(11.0, 3.0, 9.5), x, z, Material { reflectance: Rgb::ZERO, emission: Rgb::splat(10.0) });
+        add(
+            dvec3(11.0, 3.0, 9.5),
+            x,
+            z,
+            Material {
+                reflectance: Rgb::ZERO,
+                emission: Rgb::splat(10.0),
+            },
+        );
         let error = 0.1;
         let hierarchy = build(&scene, error);
-        let floor_leaves = hierarchy.leaves.iter().map(|&n| &hierarchy.nodes[n as usize]).filter(|n| n.element.as_ref().is_some_and(|e| e.patch.face == 0));
+        let floor_leaves = hierarchy
+            .leaves
+            .iter()
+            .map(|&n| &hierarchy.nodes[n as usize])
+            .filter(|n| n.element.as_ref().is_some_and(|e| e.patch.face == 0));
         let finest = floor_leaves.map(|n| n.radius).fold(f64::INFINITY, f64::min);
-        let (floor_radius, box_radius) = (scene.faces[0].polygon.radius(), scene.faces[1].polygon.radius());
-        println!("finest floor leaf radius {finest:.4} (floor radius {floor_radius:.2}, box face {box_radius:.3})");
+        let (floor_radius, box_radius) = (
+            scene.faces[0].polygon.radius(),
+            scene.faces[1].polygon.radius(),
+        );
+        println!(
+            "finest floor leaf radius {finest:.4} (floor radius {floor_radius:.2}, box face {box_radius:.3})"
+        );
         // Far below the floor's own scale, and not below the box's: a leaf is at most half its
         // splittable parent.
-        assert!(finest < MIN_RADIUS_PER_ERROR * error * floor_radius / 4.0, "{finest}");
-        assert!(finest > MIN_RADIUS_PER_ERROR * error * box_radius / 2.0, "{finest}");
+        assert!(
+            finest < MIN_RADIUS_PER_ERROR * error * floor_radius / 4.0,
+            "{finest}"
+        );
+        assert!(
+            finest > MIN_RADIUS_PER_ERROR * error * box_radius / 2.0,
+            "{finest}"
+        );
     }
 
     #[test]
@@ -1410,24 +1928,48 @@ mod tests {
         hierarchy.index(&Occluders::new(&scene));
         let (tangent, bitangent) = hierarchy.element_patch(wall).normal.any_orthonormal_pair();
         let centroid = hierarchy.nodes[wall as usize].centroid;
-        let linear = |p: DVec3| 3.0 + 0.5 * (p - centroid).dot(tangent) - 0.25 * (p - centroid).dot(bitangent);
-        let radiosity: Vec<Rgb> = hierarchy.leaves.iter().map(|&n| Rgb::splat(linear(hierarchy.nodes[n as usize].centroid))).collect();
+        let linear = |p: DVec3| {
+            3.0 + 0.5 * (p - centroid).dot(tangent) - 0.25 * (p - centroid).dot(bitangent)
+        };
+        let radiosity: Vec<Rgb> = hierarchy
+            .leaves
+            .iter()
+            .map(|&n| Rgb::splat(linear(hierarchy.nodes[n as usize].centroid)))
+            .collect();
         let means = hierarchy.pull(&radiosity);
         let slopes = hierarchy.slopes_of(&means);
         for offset in [[0.0, 0.0], [0.3, -0.7], [-0.9, 0.4]] {
             let [u, v] = hierarchy.reading_point(wall, offset);
-            let read = means[wall as usize] + slopes[wall as usize][0] * u as f64 + slopes[wall as usize][1] * v as f64;
+            let read = means[wall as usize]
+                + slopes[wall as usize][0] * u as f64
+                + slopes[wall as usize][1] * v as f64;
             let expected = linear(centroid + tangent * u as f64 + bitangent * v as f64);
-            assert!((read.x - expected).abs() < 1e-6, "at {offset:?}: {} vs {expected}", read.x);
+            assert!(
+                (read.x - expected).abs() < 1e-6,
+                "at {offset:?}: {} vs {expected}",
+                read.x
+            );
         }
         // One bright grandchild quarter: every reading stays a mix of non-negative means.
         let bright = hierarchy.nodes[wall as usize].first_child;
-        let radiosity: Vec<Rgb> = hierarchy.leaves.iter().map(|&n| if hierarchy.nodes[n as usize].parent == bright { Rgb::ONE } else { Rgb::ZERO }).collect();
+        let radiosity: Vec<Rgb> = hierarchy
+            .leaves
+            .iter()
+            .map(|&n| {
+                if hierarchy.nodes[n as usize].parent == bright {
+                    Rgb::ONE
+                } else {
+                    Rgb::ZERO
+                }
+            })
+            .collect();
         let means = hierarchy.pull(&radiosity);
         let slopes = hierarchy.slopes_of(&means);
         for offset in [[-5.0, -5.0], [5.0, -5.0], [-5.0, 5.0], [5.0, 5.0]] {
             let [u, v] = hierarchy.reading_point(wall, offset);
-            let read = means[wall as usize] + slopes[wall as usize][0] * u as f64 + slopes[wall as usize][1] * v as f64;
+            let read = means[wall as usize]
+                + slopes[wall as usize][0] * u as f64
+                + slopes[wall as usize][1] * v as f64;
             assert!(read.x >= -1e-12, "at {offset:?}: {}", read.x);
         }
     }
@@ -1438,11 +1980,19 @@ mod tests {
         let hierarchy = build(&scene, 0.1);
         let mesh = hierarchy.leaf_mesh();
         for (f, face) in scene.faces.iter().enumerate() {
-            let leaves: Vec<usize> = (0..mesh.patches.len()).filter(|&i| mesh.patches[i].face == f as u32).collect();
+            let leaves: Vec<usize> = (0..mesh.patches.len())
+                .filter(|&i| mesh.patches[i].face == f as u32)
+                .collect();
             // Face by face, as the accuracy harness and the viewers' smoothing expect.
-            assert_eq!(leaves.last().expect("a face has leaves") - leaves[0] + 1, leaves.len());
+            assert_eq!(
+                leaves.last().expect("a face has leaves") - leaves[0] + 1,
+                leaves.len()
+            );
             let area: f64 = leaves.iter().map(|&i| mesh.patches[i].area).sum();
-            assert!((area / face.polygon.area() - 1.0).abs() < 1e-12, "face {f}: {area}");
+            assert!(
+                (area / face.polygon.area() - 1.0).abs() < 1e-12,
+                "face {f}: {area}"
+            );
         }
         for patch in &mesh.patches {
             for (corner, &id) in patch.polygon.corners().iter().zip(&patch.corners) {
@@ -1468,7 +2018,10 @@ mod tests {
             let p = a.0 + (a.1 - a.0) * DVec3::new(unit(), unit(), unit());
             let q = b.0 + (b.1 - b.0) * DVec3::new(unit(), unit(), unit());
             let x = p.lerp(q, unit());
-            assert!(shaft.may_meet_box((x, x)), "{x} lies on a segment between the boxes");
+            assert!(
+                shaft.may_meet_box((x, x)),
+                "{x} lies on a segment between the boxes"
+            );
         }
         // Inside the union box but off the hull: the corner regions the planes cut away.
         assert!(!shaft.may_meet_box((dvec3(0.0, 4.5, 0.0), dvec3(0.5, 5.0, 0.2))));
@@ -1478,16 +2031,29 @@ mod tests {
 
     #[test]
     fn one_face_hides_a_pair_only_when_it_covers_every_segment() {
-        let square = |z: f64, half: f64| [dvec3(-half, -half, z), dvec3(half, -half, z), dvec3(half, half, z), dvec3(-half, half, z)];
+        let square = |z: f64, half: f64| {
+            [
+                dvec3(-half, -half, z),
+                dvec3(half, -half, z),
+                dvec3(half, half, z),
+                dvec3(-half, half, z),
+            ]
+        };
         let (below, above) = (square(0.0, 0.5), square(2.0, 0.5));
         let [a, b, c, d] = square(1.0, 2.0);
         let big = Polygon::quad(a, b, c, d);
         assert!(blocks_every_segment(&big, big.normal(), &below, &above));
         let [a, b, c, d] = square(1.0, 0.4);
         let small = Polygon::quad(a, b, c, d);
-        assert!(!blocks_every_segment(&small, small.normal(), &below, &above), "segments pass around a smaller square");
+        assert!(
+            !blocks_every_segment(&small, small.normal(), &below, &above),
+            "segments pass around a smaller square"
+        );
         let [a, b, c, d] = square(0.0, 2.0);
         let level = Polygon::quad(a, b, c, d);
-        assert!(!blocks_every_segment(&level, level.normal(), &below, &above), "a face in the plane of one end separates nothing");
+        assert!(
+            !blocks_every_segment(&level, level.normal(), &below, &above),
+            "a face in the plane of one end separates nothing"
+        );
     }
 }

@@ -18,7 +18,10 @@ pub mod visibility;
 pub use form_factors::{DenseFormFactors, Entries, FormFactorSettings, Transport};
 pub use hierarchy::{HierarchySettings, HierarchyStats};
 pub use mesh::{Mesh, Patch, PatchTarget};
-pub use pipeline::{EditError, MethodChoice, MoveReport, Session, SolveError, SolveReport, SolveRequest, Solved, solve_file, solve_mesh, solve_scene};
+pub use pipeline::{
+    EditError, MethodChoice, MoveReport, Session, SolveError, SolveReport, SolveRequest, Solved,
+    solve_file, solve_mesh, solve_scene,
+};
 pub use scene::{Material, Rgb, Scene, SceneError, View};
 pub use solve::{Method, SolveOutcome, SolverSettings, System, solve};
 

@@ -91,8 +91,10 @@ impl Mesh {
             .map(|face| {
                 let c = face.polygon.corners();
                 if face.polygon.is_quad() {
-                    let nu = Self::cells_along(0.5 * (c[0].distance(c[1]) + c[3].distance(c[2])), edge);
-                    let nv = Self::cells_along(0.5 * (c[0].distance(c[3]) + c[1].distance(c[2])), edge);
+                    let nu =
+                        Self::cells_along(0.5 * (c[0].distance(c[1]) + c[3].distance(c[2])), edge);
+                    let nv =
+                        Self::cells_along(0.5 * (c[0].distance(c[3]) + c[1].distance(c[2])), edge);
                     nu as usize * nv as usize
                 } else {
                     (Self::cells_along((2.0 * face.polygon.area()).sqrt(), edge) as usize).pow(2)
@@ -109,10 +111,18 @@ impl Mesh {
         let (mut fine, mut coarse) = (guess / 8.0, guess * 8.0);
         for _ in 0..40 {
             let middle = (fine * coarse).sqrt();
-            if Self::count_at(scene, middle) > count { fine = middle } else { coarse = middle }
+            if Self::count_at(scene, middle) > count {
+                fine = middle
+            } else {
+                coarse = middle
+            }
         }
         let miss = |edge| Self::count_at(scene, edge).abs_diff(count);
-        if miss(fine) < miss(coarse) { fine } else { coarse }
+        if miss(fine) < miss(coarse) {
+            fine
+        } else {
+            coarse
+        }
     }
 
     /// Moves every patch of `object` (and the corners they use) by `offset`.
@@ -157,13 +167,19 @@ impl Mesh {
         let base = self.positions.len() as u32;
         for b in 0..=nv {
             for a in 0..=nu {
-                self.positions.push(quad.point_at(a as f64 / nu as f64, b as f64 / nv as f64));
+                self.positions
+                    .push(quad.point_at(a as f64 / nu as f64, b as f64 / nv as f64));
             }
         }
         let index = |a: u32, b: u32| base + b * (nu + 1) + a;
         for b in 0..nv {
             for a in 0..nu {
-                let ids = [index(a, b), index(a + 1, b), index(a + 1, b + 1), index(a, b + 1)];
+                let ids = [
+                    index(a, b),
+                    index(a + 1, b),
+                    index(a + 1, b + 1),
+                    index(a, b + 1),
+                ];
                 let p = ids.map(|i| self.positions[i as usize]);
                 self.push_patch(Polygon::quad(p[0], p[1], p[2], p[3]), ids);
             }
@@ -175,7 +191,9 @@ impl Mesh {
         // k^2 similar triangles of area A / k^2: pick k so that area is about edge^2 / 2.
         let k = Self::cells_along((2.0 * triangle.area()).sqrt(), edge);
         let base = self.positions.len() as u32;
-        let at = |s: u32, t: u32| c[0] + (c[1] - c[0]) * (s as f64 / k as f64) + (c[2] - c[0]) * (t as f64 / k as f64);
+        let at = |s: u32, t: u32| {
+            c[0] + (c[1] - c[0]) * (s as f64 / k as f64) + (c[2] - c[0]) * (t as f64 / k as f64)
+        };
         // Row t holds the k + 1 - t lattice points with s = 0..=k-t.
         let mut row_start = Vec::with_capacity(k as usize + 1);
         for t in 0..=k {
@@ -189,11 +207,17 @@ impl Mesh {
             for s in 0..k - t {
                 let up = [index(s, t), index(s + 1, t), index(s, t + 1)];
                 let p = up.map(|i| self.positions[i as usize]);
-                self.push_patch(Polygon::triangle(p[0], p[1], p[2]), [up[0], up[1], up[2], up[2]]);
+                self.push_patch(
+                    Polygon::triangle(p[0], p[1], p[2]),
+                    [up[0], up[1], up[2], up[2]],
+                );
                 if s + t + 1 < k {
                     let down = [index(s + 1, t), index(s + 1, t + 1), index(s, t + 1)];
                     let p = down.map(|i| self.positions[i as usize]);
-                    self.push_patch(Polygon::triangle(p[0], p[1], p[2]), [down[0], down[1], down[2], down[2]]);
+                    self.push_patch(
+                        Polygon::triangle(p[0], p[1], p[2]),
+                        [down[0], down[1], down[2], down[2]],
+                    );
                 }
             }
         }
@@ -209,34 +233,62 @@ mod tests {
     fn scene_with(corners: &[DVec3]) -> Scene {
         let mut scene = Scene::default();
         let object = scene.add_object("plate");
-        scene.add_polygon(object, corners, Material { reflectance: Rgb::splat(0.5), emission: Rgb::ZERO });
+        scene.add_polygon(
+            object,
+            corners,
+            Material {
+                reflectance: Rgb::splat(0.5),
+                emission: Rgb::ZERO,
+            },
+        );
         scene
     }
 
     #[test]
     fn patches_tile_each_face_exactly() {
-        let quad = scene_with(&[DVec3::ZERO, dvec3(4.0, 0.0, 0.0), dvec3(4.0, 1.0, 0.0), dvec3(0.0, 1.0, 0.0)]);
+        let quad = scene_with(&[
+            DVec3::ZERO,
+            dvec3(4.0, 0.0, 0.0),
+            dvec3(4.0, 1.0, 0.0),
+            dvec3(0.0, 1.0, 0.0),
+        ]);
         let triangle = scene_with(&[DVec3::ZERO, dvec3(3.0, 0.0, 0.0), dvec3(0.0, 2.0, 0.0)]);
         for scene in [quad, triangle] {
             let area = scene.faces[0].polygon.area();
-            for target in [PatchTarget::Count(1), PatchTarget::Count(37), PatchTarget::EdgeLength(0.1)] {
+            for target in [
+                PatchTarget::Count(1),
+                PatchTarget::Count(37),
+                PatchTarget::EdgeLength(0.1),
+            ] {
                 let mesh = Mesh::build(&scene, target);
                 let sum: f64 = mesh.patches.iter().map(|p| p.area).sum();
                 assert!((sum - area).abs() < 1e-9 * area, "{target:?}");
-                assert!(mesh.patches.iter().all(|p| p.normal.distance(scene.faces[0].polygon.normal()) < 1e-9));
+                assert!(
+                    mesh.patches
+                        .iter()
+                        .all(|p| p.normal.distance(scene.faces[0].polygon.normal()) < 1e-9)
+                );
             }
         }
     }
 
     #[test]
     fn quad_cells_follow_the_aspect_ratio() {
-        let long = scene_with(&[DVec3::ZERO, dvec3(8.0, 0.0, 0.0), dvec3(8.0, 2.0, 0.0), dvec3(0.0, 2.0, 0.0)]);
+        let long = scene_with(&[
+            DVec3::ZERO,
+            dvec3(8.0, 0.0, 0.0),
+            dvec3(8.0, 2.0, 0.0),
+            dvec3(0.0, 2.0, 0.0),
+        ]);
         let mesh = Mesh::build(&long, PatchTarget::Count(16));
         assert_eq!(mesh.patches.len(), 16);
         for p in &mesh.patches {
             let c = p.polygon.corners();
             let aspect = c[0].distance(c[1]) / c[0].distance(c[3]);
-            assert!((aspect - 1.0).abs() < 1e-9, "cells should be square, got {aspect}");
+            assert!(
+                (aspect - 1.0).abs() < 1e-9,
+                "cells should be square, got {aspect}"
+            );
         }
     }
 

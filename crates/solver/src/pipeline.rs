@@ -1,15 +1,15 @@
 //! The whole offline path, scene file to solution, with a timing per stage: what the `radcast`
 //! command and the server both run.
 
-use crate::{Progress, no_progress};
 use crate::form_factors::{DenseFormFactors, FormFactorSettings, Transport};
 use crate::hierarchy::{Hierarchy, HierarchySettings, HierarchyStats};
 use crate::mesh::{Mesh, PatchTarget};
 use crate::scene::{Rgb, Scene, SceneError};
 use crate::solve::{NeedsEntries, SolveOutcome, SolverSettings, System, solve};
 use crate::visibility::Occluders;
-use serde::Serialize;
+use crate::{Progress, no_progress};
 use glam::DVec3;
+use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
@@ -58,7 +58,9 @@ impl std::str::FromStr for MethodChoice {
         if s == "hierarchical" {
             return Ok(MethodChoice::Hierarchical);
         }
-        s.parse().map(MethodChoice::Dense).map_err(|e: String| e.replace("(expected one of: ", "(expected hierarchical or one of: "))
+        s.parse().map(MethodChoice::Dense).map_err(|e: String| {
+            e.replace("(expected one of: ", "(expected hierarchical or one of: ")
+        })
     }
 }
 
@@ -78,7 +80,14 @@ impl SolveRequest {
             MethodChoice::Dense(method) => (method, None),
             MethodChoice::Hierarchical => (crate::solve::Method::Gmres, Some(hierarchy)),
         };
-        SolveRequest { solver: SolverSettings { method, ..self.solver }, hierarchy, ..self }
+        SolveRequest {
+            solver: SolverSettings {
+                method,
+                ..self.solver
+            },
+            hierarchy,
+            ..self
+        }
     }
 }
 
@@ -92,7 +101,9 @@ pub enum SolveError {
     #[error(transparent)]
     Method(#[from] NeedsEntries),
     /// The mesh is too fine for a dense matrix in the allowed memory.
-    #[error("{patches} patches need {gib:.1} GiB for the dense form-factor matrix (limit {limit_gib:.1} GiB); ask for fewer patches")]
+    #[error(
+        "{patches} patches need {gib:.1} GiB for the dense form-factor matrix (limit {limit_gib:.1} GiB); ask for fewer patches"
+    )]
     TooLarge {
         /// Patches the mesh has.
         patches: usize,
@@ -172,7 +183,11 @@ pub struct Solved {
 }
 
 /// Loads `path` and solves it.
-pub fn solve_file(path: &Path, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<Solved, SolveError> {
+pub fn solve_file(
+    path: &Path,
+    request: &SolveRequest,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<Solved, SolveError> {
     let start = Instant::now();
     let scene = Scene::load_obj(path)?;
     let load = start.elapsed().as_secs_f64();
@@ -183,7 +198,11 @@ pub fn solve_file(path: &Path, request: &SolveRequest, progress: &(dyn Fn(Progre
 }
 
 /// Meshes, computes form factors (or builds the hierarchy) and solves an already loaded scene.
-pub fn solve_scene(scene: Scene, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<Solved, SolveError> {
+pub fn solve_scene(
+    scene: Scene,
+    request: &SolveRequest,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<Solved, SolveError> {
     let mut session = match &request.hierarchy {
         Some(_) => Session::hierarchical(&scene, request, progress)?,
         None => {
@@ -196,12 +215,22 @@ pub fn solve_scene(scene: Scene, request: &SolveRequest, progress: &(dyn Fn(Prog
         }
     };
     let report = session.solve(progress);
-    Ok(Solved { scene, mesh: session.mesh, radiosity: session.radiosity, report })
+    Ok(Solved {
+        scene,
+        mesh: session.mesh,
+        radiosity: session.radiosity,
+        report,
+    })
 }
 
 /// Form factors and solve for a mesh already built from `scene` (the server meshes first so
 /// that viewers get the geometry while it solves). `seconds.mesh` holds the BVH build only.
-pub fn solve_mesh(scene: &Scene, mesh: &Mesh, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<(Vec<Rgb>, SolveReport), SolveError> {
+pub fn solve_mesh(
+    scene: &Scene,
+    mesh: &Mesh,
+    request: &SolveRequest,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<(Vec<Rgb>, SolveReport), SolveError> {
     let mut session = Session::new(scene, mesh, request, progress)?;
     let report = session.solve(progress);
     Ok((session.radiosity, report))
@@ -279,29 +308,53 @@ pub struct MoveReport {
 
 impl Session {
     /// Computes the form factors of `mesh`; nothing is solved yet.
-    pub fn new(scene: &Scene, mesh: &Mesh, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<Session, SolveError> {
+    pub fn new(
+        scene: &Scene,
+        mesh: &Mesh,
+        request: &SolveRequest,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<Session, SolveError> {
         let n = mesh.patches.len();
         let bytes = DenseFormFactors::memory_bytes(n);
         if bytes > request.max_matrix_bytes {
             let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
-            return Err(SolveError::TooLarge { patches: n, gib: gib(bytes), limit_gib: gib(request.max_matrix_bytes) });
+            return Err(SolveError::TooLarge {
+                patches: n,
+                gib: gib(bytes),
+                limit_gib: gib(request.max_matrix_bytes),
+            });
         }
         let mut seconds = StageSeconds::default();
         let clock = Instant::now();
         let occluders = Occluders::new(scene);
         seconds.mesh = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let form_factors = DenseFormFactors::compute(mesh, &occluders, &request.form_factors, progress);
+        let form_factors =
+            DenseFormFactors::compute(mesh, &occluders, &request.form_factors, progress);
         seconds.form_factors = clock.elapsed().as_secs_f64();
-        Ok(Session::assemble(scene.clone(), mesh.clone(), Transfer::Dense(form_factors), request, seconds, vec![Rgb::ZERO; n]))
+        Ok(Session::assemble(
+            scene.clone(),
+            mesh.clone(),
+            Transfer::Dense(form_factors),
+            request,
+            seconds,
+            vec![Rgb::ZERO; n],
+        ))
     }
 
     /// Builds the element and link hierarchy of `scene` with `request.hierarchy`'s settings (the
     /// defaults if it names none), which also decides the patches: the leaves.
     /// [`Session::solve`] then finishes from the refinement's last solution.
-    pub fn hierarchical(scene: &Scene, request: &SolveRequest, progress: &(dyn Fn(Progress) + Sync)) -> Result<Session, SolveError> {
+    pub fn hierarchical(
+        scene: &Scene,
+        request: &SolveRequest,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<Session, SolveError> {
         let settings = request.hierarchy.unwrap_or_default();
-        let request = &SolveRequest { hierarchy: Some(settings), ..*request };
+        let request = &SolveRequest {
+            hierarchy: Some(settings),
+            ..*request
+        };
         if request.solver.method.needs_entries() {
             return Err(NeedsEntries(request.solver.method).into());
         }
@@ -310,14 +363,36 @@ impl Session {
         let occluders = Occluders::new(scene);
         seconds.mesh = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let (hierarchy, radiosity) = Hierarchy::build(scene, &occluders, &settings, request.form_factors, &request.solver, progress)?;
+        let (hierarchy, radiosity) = Hierarchy::build(
+            scene,
+            &occluders,
+            &settings,
+            request.form_factors,
+            &request.solver,
+            progress,
+        )?;
         seconds.form_factors = clock.elapsed().as_secs_f64();
         let mesh = hierarchy.leaf_mesh();
-        Ok(Session::assemble(scene.clone(), mesh, Transfer::Hierarchy(Box::new(hierarchy)), request, seconds, radiosity))
+        Ok(Session::assemble(
+            scene.clone(),
+            mesh,
+            Transfer::Hierarchy(Box::new(hierarchy)),
+            request,
+            seconds,
+            radiosity,
+        ))
     }
 
-    fn assemble(scene: Scene, mesh: Mesh, transfer: Transfer, request: &SolveRequest, seconds: StageSeconds, radiosity: Vec<Rgb>) -> Session {
-        let column = |f: fn(&crate::mesh::Patch) -> Rgb| mesh.patches.iter().map(f).collect::<Vec<_>>();
+    fn assemble(
+        scene: Scene,
+        mesh: Mesh,
+        transfer: Transfer,
+        request: &SolveRequest,
+        seconds: StageSeconds,
+        radiosity: Vec<Rgb>,
+    ) -> Session {
+        let column =
+            |f: fn(&crate::mesh::Patch) -> Rgb| mesh.patches.iter().map(f).collect::<Vec<_>>();
         Session {
             objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
             patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
@@ -357,7 +432,11 @@ impl Session {
     }
 
     fn object_index(&self, name: &str) -> Result<u32, EditError> {
-        self.objects.iter().position(|o| o == name).map(|i| i as u32).ok_or_else(|| EditError::UnknownObject(name.into()))
+        self.objects
+            .iter()
+            .position(|o| o == name)
+            .map(|i| i as u32)
+            .ok_or_else(|| EditError::UnknownObject(name.into()))
     }
 
     /// Moves object `name` by `offset`, recomputing only the form factors it can affect. The
@@ -372,13 +451,29 @@ impl Session {
         // patches, and of the scene, which a hierarchy is rebuilt from) and let the next solve
         // start over from it.
         for (object, emission) in std::mem::take(&mut self.edited) {
-            for (e, _) in self.emission.iter_mut().zip(&self.patch_objects).filter(|(_, o)| **o == object) {
+            for (e, _) in self
+                .emission
+                .iter_mut()
+                .zip(&self.patch_objects)
+                .filter(|(_, o)| **o == object)
+            {
                 *e = emission;
             }
-            self.scene.faces.iter_mut().filter(|f| f.object == object).for_each(|f| f.emission = emission);
+            self.scene
+                .faces
+                .iter_mut()
+                .filter(|f| f.object == object)
+                .for_each(|f| f.emission = emission);
         }
         self.responses.clear();
-        let corners = |scene: &Scene| scene.faces.iter().filter(|f| f.object == object).flat_map(|f| f.polygon.corners().to_vec()).collect::<Vec<_>>();
+        let corners = |scene: &Scene| {
+            scene
+                .faces
+                .iter()
+                .filter(|f| f.object == object)
+                .flat_map(|f| f.polygon.corners().to_vec())
+                .collect::<Vec<_>>()
+        };
         let mut swept = corners(&self.scene);
         self.scene.translate_object(object, offset);
         swept.extend(corners(&self.scene));
@@ -387,17 +482,33 @@ impl Session {
                 let occluders = Occluders::new(&self.scene);
                 self.mesh.translate_object(object, offset);
                 let moved: Vec<bool> = self.patch_objects.iter().map(|o| *o == object).collect();
-                let stats = form_factors.update_moved(&self.mesh, &occluders, &moved, crate::geometry::bounds(swept));
-                Ok(MoveReport { pairs: stats.pairs, rows: stats.rows, entries: stats.entries, seconds: clock.elapsed().as_secs_f64() })
+                let stats = form_factors.update_moved(
+                    &self.mesh,
+                    &occluders,
+                    &moved,
+                    crate::geometry::bounds(swept),
+                );
+                Ok(MoveReport {
+                    pairs: stats.pairs,
+                    rows: stats.rows,
+                    entries: stats.entries,
+                    seconds: clock.elapsed().as_secs_f64(),
+                })
             }
             Transfer::Hierarchy(_) => {
                 // Refinement depends on where light falls, so the hierarchy is built again: new
                 // leaves, which viewers get as a new geometry.
                 let seconds = self.seconds;
-                *self = Session::hierarchical(&self.scene, &self.request, &no_progress).expect("this session's method already ran on a hierarchy");
+                *self = Session::hierarchical(&self.scene, &self.request, &no_progress)
+                    .expect("this session's method already ran on a hierarchy");
                 self.seconds = seconds;
                 let stats = self.hierarchy_stats().expect("a hierarchical session");
-                Ok(MoveReport { pairs: stats.links, rows: stats.elements, entries: stats.links, seconds: clock.elapsed().as_secs_f64() })
+                Ok(MoveReport {
+                    pairs: stats.links,
+                    rows: stats.elements,
+                    entries: stats.links,
+                    seconds: clock.elapsed().as_secs_f64(),
+                })
             }
         }
     }
@@ -426,10 +537,26 @@ impl Session {
     }
 
     /// Solves for `emission` from `initial` (or zero).
-    fn solve_for(&self, emission: &[Rgb], initial: Option<&[Rgb]>, progress: &(dyn Fn(Progress) + Sync)) -> SolveOutcome {
-        let system = System { reflectance: &self.reflectance, emission, area: &self.area };
+    fn solve_for(
+        &self,
+        emission: &[Rgb],
+        initial: Option<&[Rgb]>,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> SolveOutcome {
+        let system = System {
+            reflectance: &self.reflectance,
+            emission,
+            area: &self.area,
+        };
         // Both constructors refuse a method the transport cannot run.
-        solve(self.transfer.transport(), &system, &self.request.solver, initial, progress).expect("method checked when the session was made")
+        solve(
+            self.transfer.transport(),
+            &system,
+            &self.request.solver,
+            initial,
+            progress,
+        )
+        .expect("method checked when the session was made")
     }
 
     /// Computes the responses of `object` unless known; returns the solver iterations spent.
@@ -437,13 +564,31 @@ impl Session {
         if self.responses.contains_key(&object) {
             return 0;
         }
-        let mask = |value: &dyn Fn(usize) -> Rgb| -> Vec<Rgb> { (0..self.emission.len()).map(|i| if self.patch_objects[i] == object { value(i) } else { Rgb::ZERO }).collect() };
+        let mask = |value: &dyn Fn(usize) -> Rgb| -> Vec<Rgb> {
+            (0..self.emission.len())
+                .map(|i| {
+                    if self.patch_objects[i] == object {
+                        value(i)
+                    } else {
+                        Rgb::ZERO
+                    }
+                })
+                .collect()
+        };
         let unit = self.solve_for(&mask(&|_| Rgb::ONE), None, &no_progress);
         let original_emission = mask(&|i| self.emission[i]);
         let mut iterations = unit.iterations;
         // Uniform original emission needs no second solve: its response is e * G.
-        let first = original_emission.iter().zip(&self.patch_objects).find(|(_, o)| **o == object).map(|(e, _)| *e).unwrap_or(Rgb::ZERO);
-        let uniform = original_emission.iter().zip(&self.patch_objects).all(|(e, o)| *o != object || *e == first);
+        let first = original_emission
+            .iter()
+            .zip(&self.patch_objects)
+            .find(|(_, o)| **o == object)
+            .map(|(e, _)| *e)
+            .unwrap_or(Rgb::ZERO);
+        let uniform = original_emission
+            .iter()
+            .zip(&self.patch_objects)
+            .all(|(e, o)| *o != object || *e == first);
         let original = if uniform {
             unit.radiosity.iter().map(|g| *g * first).collect()
         } else {
@@ -458,7 +603,13 @@ impl Session {
     /// Prepares the responses of every object that emits in the scene, so that edits of the
     /// scene's lights apply at once. Returns the solver iterations spent.
     pub fn prepare_emitters(&mut self) -> usize {
-        let emitting: std::collections::BTreeSet<u32> = self.emission.iter().zip(&self.patch_objects).filter(|(e, _)| e.max_element() > 0.0).map(|(_, o)| *o).collect();
+        let emitting: std::collections::BTreeSet<u32> = self
+            .emission
+            .iter()
+            .zip(&self.patch_objects)
+            .filter(|(e, _)| e.max_element() > 0.0)
+            .map(|(_, o)| *o)
+            .collect();
         emitting.into_iter().map(|o| self.ensure_response(o)).sum()
     }
 
@@ -489,8 +640,16 @@ impl Session {
         };
         self.seconds.solve = clock.elapsed().as_secs_f64();
         self.seconds.total = self.seconds.mesh + self.seconds.form_factors + self.seconds.solve;
-        let (mut area, mut power) = (vec![0.0; self.objects.len()], vec![Rgb::ZERO; self.objects.len()]);
-        for ((o, a), b) in self.patch_objects.iter().zip(&self.area).zip(&self.radiosity) {
+        let (mut area, mut power) = (
+            vec![0.0; self.objects.len()],
+            vec![Rgb::ZERO; self.objects.len()],
+        );
+        for ((o, a), b) in self
+            .patch_objects
+            .iter()
+            .zip(&self.area)
+            .zip(&self.radiosity)
+        {
             area[*o as usize] += a;
             power[*o as usize] += *b * *a;
         }
@@ -498,7 +657,11 @@ impl Session {
             patches: self.radiosity.len(),
             triangles: self.triangles,
             skipped_faces: self.skipped_faces,
-            method: if self.request.hierarchy.is_some() { "hierarchical".into() } else { self.request.solver.method.name().into() },
+            method: if self.request.hierarchy.is_some() {
+                "hierarchical".into()
+            } else {
+                self.request.solver.method.name().into()
+            },
             iterations,
             residual,
             converged,
@@ -512,7 +675,15 @@ impl Session {
                 .objects
                 .iter()
                 .zip(area.iter().zip(&power))
-                .map(|(name, (a, p))| ObjectRadiosity { name: name.clone(), area: *a, radiosity: if *a > 0.0 { (*p / *a).to_array() } else { [0.0; 3] } })
+                .map(|(name, (a, p))| ObjectRadiosity {
+                    name: name.clone(),
+                    area: *a,
+                    radiosity: if *a > 0.0 {
+                        (*p / *a).to_array()
+                    } else {
+                        [0.0; 3]
+                    },
+                })
                 .collect(),
             hierarchy: self.hierarchy_stats(),
         }

@@ -54,14 +54,18 @@ fn uniform(rng: &mut Pcg64Mcg) -> f64 {
 /// Chooses an index with probability proportional to `weights` through their running sums.
 fn pick(cumulative: &[f64], u: f64) -> usize {
     let target = u * cumulative.last().copied().unwrap_or(0.0);
-    cumulative.partition_point(|&c| c <= target).min(cumulative.len().saturating_sub(1))
+    cumulative
+        .partition_point(|&c| c <= target)
+        .min(cumulative.len().saturating_sub(1))
 }
 
 fn running_sums(values: impl Iterator<Item = f64>) -> Vec<f64> {
-    values.scan(0.0, |sum, v| {
-        *sum += v;
-        Some(*sum)
-    }).collect()
+    values
+        .scan(0.0, |sum, v| {
+            *sum += v;
+            Some(*sum)
+        })
+        .collect()
 }
 
 /// `count` points spread uniformly by area over the scene's faces.
@@ -72,7 +76,10 @@ pub fn place_probes(scene: &Scene, count: usize, seed: u64) -> Vec<(u32, DVec3)>
         .map(|_| {
             let face = pick(&cumulative, uniform(&mut rng));
             let (u, v, w) = (uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
-            (face as u32, scene.faces[face].polygon.uniform_point(u, v, w))
+            (
+                face as u32,
+                scene.faces[face].polygon.uniform_point(u, v, w),
+            )
         })
         .collect()
 }
@@ -93,16 +100,30 @@ impl Tracer<'_> {
         let k = pick(&self.emitter_cumulative, uniform(rng));
         let emitter = &self.scene.faces[self.emitters[k] as usize];
         let total = self.emitter_cumulative[self.emitter_cumulative.len() - 1];
-        let probability = (self.emitter_cumulative[k] - if k == 0 { 0.0 } else { self.emitter_cumulative[k - 1] }) / total;
-        let y = emitter.polygon.uniform_point(uniform(rng), uniform(rng), uniform(rng));
+        let probability = (self.emitter_cumulative[k]
+            - if k == 0 {
+                0.0
+            } else {
+                self.emitter_cumulative[k - 1]
+            })
+            / total;
+        let y = emitter
+            .polygon
+            .uniform_point(uniform(rng), uniform(rng), uniform(rng));
         let to_light = y - x;
         let distance_sq = to_light.length_squared();
         let direction = to_light / distance_sq.sqrt();
-        let (cos_x, cos_y) = (normal.dot(direction), -emitter.polygon.normal().dot(direction));
+        let (cos_x, cos_y) = (
+            normal.dot(direction),
+            -emitter.polygon.normal().dot(direction),
+        );
         if self.emitters[k] == face || cos_x <= 0.0 || cos_y <= 0.0 {
             return Rgb::ZERO;
         }
-        if !self.occluders.segment_is_clear(x, y, [face, self.emitters[k]]) {
+        if !self
+            .occluders
+            .segment_is_clear(x, y, [face, self.emitters[k]])
+        {
             return Rgb::ZERO;
         }
         // Radiance of a Lambertian emitter is E / pi; the area pdf is p_k / A_k.
@@ -117,7 +138,9 @@ impl Tracer<'_> {
         for depth in 0.. {
             irradiance += throughput * self.direct(point, normal, on, rng);
             let direction = cosine_direction(normal, uniform(rng), uniform(rng));
-            let Some(hit) = self.occluders.closest_hit(point, direction, on) else { break };
+            let Some(hit) = self.occluders.closest_hit(point, direction, on) else {
+                break;
+            };
             if !hit.front {
                 break; // the back of a one-sided surface absorbs
             }
@@ -132,27 +155,46 @@ impl Tracer<'_> {
                 }
                 throughput /= survive;
             }
-            (point, normal, on) = (point + direction * hit.distance, next.polygon.normal(), hit.face);
+            (point, normal, on) = (
+                point + direction * hit.distance,
+                next.polygon.normal(),
+                hit.face,
+            );
         }
         start.emission + start.reflectance * irradiance
     }
 }
 
 /// Estimates the radiosity at every probe with `samples` paths each.
-pub fn trace_probes(scene: &Scene, occluders: &Occluders, probes: &[(u32, DVec3)], samples: u32, seed: u64, progress: &(dyn Fn(Progress) + Sync)) -> Vec<Probe> {
-    let emitters: Vec<u32> = (0..scene.faces.len() as u32).filter(|&f| scene.faces[f as usize].emission.max_element() > 0.0).collect();
+pub fn trace_probes(
+    scene: &Scene,
+    occluders: &Occluders,
+    probes: &[(u32, DVec3)],
+    samples: u32,
+    seed: u64,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Vec<Probe> {
+    let emitters: Vec<u32> = (0..scene.faces.len() as u32)
+        .filter(|&f| scene.faces[f as usize].emission.max_element() > 0.0)
+        .collect();
     // Emitters are chosen by emitted power, so bright lights get the samples.
     let emitter_cumulative = running_sums(emitters.iter().map(|&f| {
         let face = &scene.faces[f as usize];
         face.polygon.area() * face.emission.max_element()
     }));
-    let tracer = Tracer { scene, occluders, emitters, emitter_cumulative };
+    let tracer = Tracer {
+        scene,
+        occluders,
+        emitters,
+        emitter_cumulative,
+    };
     let done = AtomicUsize::new(0);
     probes
         .par_iter()
         .enumerate()
         .map(|(index, &(face, position))| {
-            let mut rng = Pcg64Mcg::seed_from_u64(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            let mut rng =
+                Pcg64Mcg::seed_from_u64(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
             let (mut sum, mut sum_sq) = (Rgb::ZERO, Rgb::ZERO);
             for _ in 0..samples {
                 let b = tracer.sample(face, position, &mut rng);
@@ -163,11 +205,16 @@ pub fn trace_probes(scene: &Scene, occluders: &Occluders, probes: &[(u32, DVec3)
             let mean = sum / n;
             let variance = ((sum_sq / n - mean * mean) * (n / (n - 1.0).max(1.0))).max(Rgb::ZERO);
             let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
-            progress(Progress::Probes { done: finished, total: probes.len() });
+            progress(Progress::Probes {
+                done: finished,
+                total: probes.len(),
+            });
             Probe {
                 position: position.to_array(),
                 face,
-                object: scene.objects[scene.faces[face as usize].object as usize].name.clone(),
+                object: scene.objects[scene.faces[face as usize].object as usize]
+                    .name
+                    .clone(),
                 radiosity: mean.to_array(),
                 standard_error: (variance / n).to_array().map(f64::sqrt),
             }

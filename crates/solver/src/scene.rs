@@ -102,23 +102,38 @@ impl View {
     fn parse(words: &str) -> Result<View, String> {
         let w: Vec<&str> = words.split_whitespace().collect();
         let number = |i: usize| -> Result<f64, String> {
-            w.get(i).and_then(|s| s.parse::<f64>().ok()).filter(|x| x.is_finite()).ok_or_else(|| format!("expected a finite number at word {}", i + 1))
+            w.get(i)
+                .and_then(|s| s.parse::<f64>().ok())
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!("expected a finite number at word {}", i + 1))
         };
         let vector = |label: &str, at: usize| -> Result<DVec3, String> {
             if w.get(at) != Some(&label) {
                 return Err(format!("expected '{label}' at word {}", at + 1));
             }
-            Ok(DVec3::new(number(at + 1)?, number(at + 2)?, number(at + 3)?))
+            Ok(DVec3::new(
+                number(at + 1)?,
+                number(at + 2)?,
+                number(at + 3)?,
+            ))
         };
         let (eye, target, up) = (vector("eye", 0)?, vector("target", 4)?, vector("up", 8)?);
         if w.get(12) != Some(&"fov") || w.len() != 14 {
             return Err("expected `#@view eye X Y Z target X Y Z up X Y Z fov DEGREES`".into());
         }
         let vertical_fov_degrees = number(13)?;
-        if !(vertical_fov_degrees > 0.0 && vertical_fov_degrees < 180.0) || eye == target || up == DVec3::ZERO {
+        if !(vertical_fov_degrees > 0.0 && vertical_fov_degrees < 180.0)
+            || eye == target
+            || up == DVec3::ZERO
+        {
             return Err("the view needs eye != target, a non-zero up and a fov in (0, 180)".into());
         }
-        Ok(View { eye, target, up, vertical_fov_degrees })
+        Ok(View {
+            eye,
+            target,
+            up,
+            vertical_fov_degrees,
+        })
     }
 }
 
@@ -169,7 +184,12 @@ impl Scene {
     /// Adds a polygon given by its corners (counter-clockwise seen from the front) to `object`.
     /// Planar convex quads stay quads; other polygons are split into a triangle fan.
     pub fn add_polygon(&mut self, object: u32, corners: &[DVec3], material: Material) {
-        let face = |polygon| Face { polygon, object, reflectance: material.reflectance, emission: material.emission };
+        let face = |polygon| Face {
+            polygon,
+            object,
+            reflectance: material.reflectance,
+            emission: material.emission,
+        };
         if let [a, b, c, d] = *corners
             && Polygon::is_planar_convex_quad(a, b, c, d)
         {
@@ -177,27 +197,43 @@ impl Scene {
             return;
         }
         for k in 1..corners.len().saturating_sub(1) {
-            self.faces.push(face(Polygon::triangle(corners[0], corners[k], corners[k + 1])));
+            self.faces.push(face(Polygon::triangle(
+                corners[0],
+                corners[k],
+                corners[k + 1],
+            )));
         }
     }
 
     /// The axis-aligned box around every face, or `None` for a scene without faces.
     pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
-        (!self.faces.is_empty()).then(|| crate::geometry::bounds(self.faces.iter().flat_map(|f| f.polygon.corners().iter().copied())))
+        (!self.faces.is_empty()).then(|| {
+            crate::geometry::bounds(
+                self.faces
+                    .iter()
+                    .flat_map(|f| f.polygon.corners().iter().copied()),
+            )
+        })
     }
 
     /// Drops faces whose area is negligible against the scene's size, counting them.
     pub fn drop_degenerate_faces(&mut self) {
-        let diagonal_sq = self.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length_squared());
+        let diagonal_sq = self
+            .bounds()
+            .map_or(0.0, |(lo, hi)| (hi - lo).length_squared());
         let before = self.faces.len();
         // Area ratios down to 1e-12 of the scene are real geometry (issue: tiny next to huge).
-        self.faces.retain(|f| f.polygon.area() > 1e-14 * diagonal_sq);
+        self.faces
+            .retain(|f| f.polygon.area() > 1e-14 * diagonal_sq);
         self.skipped_degenerate_faces += before - self.faces.len();
     }
 
     /// Number of triangles the faces make (a quad counts two).
     pub fn triangle_count(&self) -> usize {
-        self.faces.iter().map(|f| if f.polygon.is_quad() { 2 } else { 1 }).sum()
+        self.faces
+            .iter()
+            .map(|f| if f.polygon.is_quad() { 2 } else { 1 })
+            .sum()
     }
 
     /// True when some face emits light.
@@ -228,10 +264,18 @@ impl Scene {
 
     /// Loads an OBJ file and the MTL libraries it names (relative to the OBJ's folder).
     pub fn load_obj(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+            path: path.into(),
+            source,
+        })?;
         let folder = path.parent().unwrap_or(Path::new("."));
         let mtl_failure = std::cell::RefCell::new(None);
-        let options = tobj::LoadOptions { triangulate: false, single_index: true, ignore_lines: true, ignore_points: true };
+        let options = tobj::LoadOptions {
+            triangulate: false,
+            single_index: true,
+            ignore_lines: true,
+            ignore_points: true,
+        };
         let loaded = tobj::load_obj_buf(&mut text.as_bytes(), &options, |mtl| {
             let mtl_path = folder.join(mtl);
             let result = tobj::load_mtl(&mtl_path);
@@ -246,29 +290,49 @@ impl Scene {
                 if let Some(mtl_path) = mtl_failure.take() {
                     return Err(mtl_error(&mtl_path));
                 }
-                let materials = materials.map_err(|e| SceneError::Parse { path: path.into(), reason: e.to_string() })?;
+                let materials = materials.map_err(|e| SceneError::Parse {
+                    path: path.into(),
+                    reason: e.to_string(),
+                })?;
                 lint_obj(path, &text, Some(&materials))?;
                 (models, materials)
             }
             Err(e) => {
                 lint_obj(path, &text, None)?;
-                return Err(SceneError::Parse { path: path.into(), reason: e.to_string() });
+                return Err(SceneError::Parse {
+                    path: path.into(),
+                    reason: e.to_string(),
+                });
             }
         };
-        let mtl_path = first_mtllib(&text).map(|m| folder.join(m)).unwrap_or_else(|| path.into());
+        let mtl_path = first_mtllib(&text)
+            .map(|m| folder.join(m))
+            .unwrap_or_else(|| path.into());
         let checked: Vec<Material> = materials
             .iter()
             .map(|m| {
-                let rgb = |c: Option<[f32; 3]>| c.map(|c| Rgb::from(c.map(f64::from))).unwrap_or(Rgb::ZERO);
-                let material = Material { reflectance: rgb(m.diffuse), emission: rgb(m.emissive) };
+                let rgb = |c: Option<[f32; 3]>| {
+                    c.map(|c| Rgb::from(c.map(f64::from))).unwrap_or(Rgb::ZERO)
+                };
+                let material = Material {
+                    reflectance: rgb(m.diffuse),
+                    emission: rgb(m.emissive),
+                };
                 material
                     .validate()
                     .map(|()| material)
-                    .map_err(|reason| SceneError::Material { path: mtl_path.clone(), material: m.name.clone(), reason })
+                    .map_err(|reason| SceneError::Material {
+                        path: mtl_path.clone(),
+                        material: m.name.clone(),
+                        reason,
+                    })
             })
             .collect::<Result<_, _>>()?;
 
-        let mut scene = Scene { view: find_view(path, &text)?, ..Scene::default() };
+        let mut scene = Scene {
+            view: find_view(path, &text)?,
+            ..Scene::default()
+        };
         let mut object_ids: HashMap<String, u32> = HashMap::new();
         for model in &models {
             let mesh = &model.mesh;
@@ -276,17 +340,29 @@ impl Scene {
                 continue;
             }
             let Some(material) = mesh.material_id.map(|id| checked[id]) else {
-                return Err(SceneError::NoMaterial { path: path.into(), object: model.name.clone() });
+                return Err(SceneError::NoMaterial {
+                    path: path.into(),
+                    object: model.name.clone(),
+                });
             };
-            let object = *object_ids.entry(model.name.clone()).or_insert_with(|| scene.add_object(model.name.clone()));
+            let object = *object_ids
+                .entry(model.name.clone())
+                .or_insert_with(|| scene.add_object(model.name.clone()));
             let position = |i: u32| {
                 let p = &mesh.positions[3 * i as usize..3 * i as usize + 3];
                 DVec3::new(p[0].into(), p[1].into(), p[2].into())
             };
             let mut start = 0;
-            let arities = if mesh.face_arities.is_empty() { vec![3; mesh.indices.len() / 3] } else { mesh.face_arities.clone() };
+            let arities = if mesh.face_arities.is_empty() {
+                vec![3; mesh.indices.len() / 3]
+            } else {
+                mesh.face_arities.clone()
+            };
             for arity in arities {
-                let corners: Vec<DVec3> = mesh.indices[start..start + arity as usize].iter().map(|&i| position(i)).collect();
+                let corners: Vec<DVec3> = mesh.indices[start..start + arity as usize]
+                    .iter()
+                    .map(|&i| position(i))
+                    .collect();
                 start += arity as usize;
                 scene.add_polygon(object, &corners, material);
             }
@@ -301,28 +377,51 @@ impl Scene {
 
 fn mtl_error(mtl_path: &Path) -> SceneError {
     match std::fs::metadata(mtl_path) {
-        Err(source) => SceneError::Io { path: mtl_path.into(), source },
-        Ok(_) => SceneError::Parse { path: mtl_path.into(), reason: "not a valid MTL file".into() },
+        Err(source) => SceneError::Io {
+            path: mtl_path.into(),
+            source,
+        },
+        Ok(_) => SceneError::Parse {
+            path: mtl_path.into(),
+            reason: "not a valid MTL file".into(),
+        },
     }
 }
 
 fn find_view(path: &Path, text: &str) -> Result<Option<View>, SceneError> {
     for (number, line) in text.lines().enumerate() {
         if let Some(words) = line.trim().strip_prefix("#@view") {
-            return View::parse(words).map(Some).map_err(|reason| SceneError::Line { path: path.into(), line: number + 1, reason });
+            return View::parse(words)
+                .map(Some)
+                .map_err(|reason| SceneError::Line {
+                    path: path.into(),
+                    line: number + 1,
+                    reason,
+                });
         }
     }
     Ok(None)
 }
 
 fn first_mtllib(text: &str) -> Option<&str> {
-    text.lines().find_map(|l| l.trim().strip_prefix("mtllib ").map(str::trim))
+    text.lines()
+        .find_map(|l| l.trim().strip_prefix("mtllib ").map(str::trim))
 }
 
 /// Line-level checks that the OBJ parser does not report with a line number: non-finite
 /// coordinates, face indices out of range, and unknown materials (when the library loaded).
-fn lint_obj(path: &Path, text: &str, materials: Option<&[tobj::Material]>) -> Result<(), SceneError> {
-    let fail = |line: usize, reason: String| Err(SceneError::Line { path: path.into(), line: line + 1, reason });
+fn lint_obj(
+    path: &Path,
+    text: &str,
+    materials: Option<&[tobj::Material]>,
+) -> Result<(), SceneError> {
+    let fail = |line: usize, reason: String| {
+        Err(SceneError::Line {
+            path: path.into(),
+            line: line + 1,
+            reason,
+        })
+    };
     let mut vertex_count: i64 = 0;
     for (number, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
@@ -332,7 +431,14 @@ fn lint_obj(path: &Path, text: &str, materials: Option<&[tobj::Material]>) -> Re
                 for word in words.take(3) {
                     match word.parse::<f64>() {
                         Ok(x) if x.is_finite() => {}
-                        _ => return fail(number, format!("vertex {vertex_count} has coordinate '{word}', which is not a finite number")),
+                        _ => {
+                            return fail(
+                                number,
+                                format!(
+                                    "vertex {vertex_count} has coordinate '{word}', which is not a finite number"
+                                ),
+                            );
+                        }
                     }
                 }
             }
@@ -343,9 +449,18 @@ fn lint_obj(path: &Path, text: &str, materials: Option<&[tobj::Material]>) -> Re
                         return fail(number, format!("face vertex '{word}' is not an index"));
                     };
                     // OBJ indices are one-based; negative ones count back from the last vertex.
-                    let resolved = if index < 0 { vertex_count + 1 + index } else { index };
+                    let resolved = if index < 0 {
+                        vertex_count + 1 + index
+                    } else {
+                        index
+                    };
                     if resolved < 1 || resolved > vertex_count {
-                        return fail(number, format!("face refers to vertex {index}, but only {vertex_count} vertices are defined before it"));
+                        return fail(
+                            number,
+                            format!(
+                                "face refers to vertex {index}, but only {vertex_count} vertices are defined before it"
+                            ),
+                        );
                     }
                 }
             }
@@ -354,7 +469,10 @@ fn lint_obj(path: &Path, text: &str, materials: Option<&[tobj::Material]>) -> Re
                 if let Some(materials) = materials
                     && !materials.iter().any(|m| m.name == name)
                 {
-                    return fail(number, format!("material '{name}' is not defined in any mtllib"));
+                    return fail(
+                        number,
+                        format!("material '{name}' is not defined in any mtllib"),
+                    );
                 }
             }
             _ => {}

@@ -28,7 +28,12 @@ pub enum Method {
 
 impl Method {
     /// Every method, for sweeps and help texts.
-    pub const ALL: [Method; 4] = [Method::Jacobi, Method::GaussSeidel, Method::Progressive, Method::Gmres];
+    pub const ALL: [Method; 4] = [
+        Method::Jacobi,
+        Method::GaussSeidel,
+        Method::Progressive,
+        Method::Gmres,
+    ];
 
     /// The name used on the command line and in JSON.
     pub fn name(self) -> &'static str {
@@ -50,10 +55,16 @@ impl fmt::Display for Method {
 impl FromStr for Method {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Method::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
-            let names: Vec<_> = Method::ALL.iter().map(|m| m.name()).collect();
-            format!("unknown method '{s}' (expected one of: {})", names.join(", "))
-        })
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<_> = Method::ALL.iter().map(|m| m.name()).collect();
+                format!(
+                    "unknown method '{s}' (expected one of: {})",
+                    names.join(", ")
+                )
+            })
     }
 }
 
@@ -72,7 +83,12 @@ pub struct SolverSettings {
 
 impl Default for SolverSettings {
     fn default() -> Self {
-        SolverSettings { method: Method::Gmres, tolerance: 1e-6, max_iterations: 100_000, relaxation: 1.0 }
+        SolverSettings {
+            method: Method::Gmres,
+            tolerance: 1e-6,
+            max_iterations: 100_000,
+            relaxation: 1.0,
+        }
     }
 }
 
@@ -105,18 +121,26 @@ impl System<'_> {
     /// `r = E + rho * F B - B` into `r`.
     fn residual_into(&self, transport: &dyn Transport, radiosity: &[Rgb], r: &mut [Rgb]) {
         transport.gather(radiosity, r);
-        r.par_iter_mut().enumerate().for_each(|(i, r)| *r = self.emission[i] + self.reflectance[i] * *r - radiosity[i]);
+        r.par_iter_mut()
+            .enumerate()
+            .for_each(|(i, r)| *r = self.emission[i] + self.reflectance[i] * *r - radiosity[i]);
     }
 
     /// `sqrt(sum_i A_i |v_i|^2)`.
     fn weighted_norm(&self, v: &[Rgb]) -> f64 {
-        v.iter().zip(self.area).map(|(x, a)| a * x.length_squared()).sum::<f64>().sqrt()
+        v.iter()
+            .zip(self.area)
+            .map(|(x, a)| a * x.length_squared())
+            .sum::<f64>()
+            .sqrt()
     }
 }
 
 /// A method that updates one patch at a time asked of a transport that has no single entries.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("{0} updates one patch at a time and needs single form-factor rows; this transport only offers whole products (use jacobi or gmres)")]
+#[error(
+    "{0} updates one patch at a time and needs single form-factor rows; this transport only offers whole products (use jacobi or gmres)"
+)]
 pub struct NeedsEntries(pub Method);
 
 impl Method {
@@ -138,13 +162,26 @@ pub fn solve(
     if settings.method.needs_entries() && entries.is_none() {
         return Err(NeedsEntries(settings.method));
     }
-    let mut radiosity = initial.map(<[Rgb]>::to_vec).unwrap_or_else(|| vec![Rgb::ZERO; n]);
+    let mut radiosity = initial
+        .map(<[Rgb]>::to_vec)
+        .unwrap_or_else(|| vec![Rgb::ZERO; n]);
     let emission_norm = system.weighted_norm(system.emission);
     if emission_norm == 0.0 {
         // No light: the answer is exactly zero, not 0/0.
-        return Ok(SolveOutcome { radiosity: vec![Rgb::ZERO; n], iterations: 0, residual: 0.0, converged: true });
+        return Ok(SolveOutcome {
+            radiosity: vec![Rgb::ZERO; n],
+            iterations: 0,
+            residual: 0.0,
+            converged: true,
+        });
     }
-    let mut run = Run { transport, system, settings, emission_norm, progress };
+    let mut run = Run {
+        transport,
+        system,
+        settings,
+        emission_norm,
+        progress,
+    };
     let (iterations, residual) = match (settings.method, entries) {
         (Method::GaussSeidel, Some(entries)) => run.gauss_seidel(entries, &mut radiosity),
         (Method::Progressive, Some(entries)) => run.progressive(entries, &mut radiosity),
@@ -154,7 +191,12 @@ pub fn solve(
     };
     // The exact solution is a sum of non-negative terms; clamp round-off below zero.
     radiosity.iter_mut().for_each(|b| *b = b.max(Rgb::ZERO));
-    Ok(SolveOutcome { radiosity, iterations, residual, converged: residual <= settings.tolerance })
+    Ok(SolveOutcome {
+        radiosity,
+        iterations,
+        residual,
+        converged: residual <= settings.tolerance,
+    })
 }
 
 /// Channel-wise `x / y`, zero where `y` is zero (a channel with no light, or a converged one).
@@ -173,21 +215,37 @@ struct Run<'a> {
 impl Run<'_> {
     /// GMRES's iterate `x0 + D^-1 V y` for the cycle so far, where `H y = g` (back-substitution
     /// on the rotated upper-triangular Hessenberg columns).
-    fn iterate(&self, start: &[Rgb], hessenberg: &[Vec<Rgb>], g: &[Rgb], basis: &[Vec<Rgb>], scale: &[f64]) -> Vec<Rgb> {
+    fn iterate(
+        &self,
+        start: &[Rgb],
+        hessenberg: &[Vec<Rgb>],
+        g: &[Rgb],
+        basis: &[Vec<Rgb>],
+        scale: &[f64],
+    ) -> Vec<Rgb> {
         let m = hessenberg.len();
         let mut y = vec![Rgb::ZERO; m];
         for i in (0..m).rev() {
             let tail = (i + 1..m).map(|j| hessenberg[j][i] * y[j]).sum::<Rgb>();
             y[i] = safe_div(g[i] - tail, hessenberg[i][i]);
         }
-        start.iter().enumerate().map(|(i, b)| *b + (0..m).map(|k| y[k] * basis[k][i]).sum::<Rgb>() / scale[i]).collect()
+        start
+            .iter()
+            .enumerate()
+            .map(|(i, b)| *b + (0..m).map(|k| y[k] * basis[k][i]).sum::<Rgb>() / scale[i])
+            .collect()
     }
 
     /// Reports and says whether to stop.
     fn done(&self, iteration: usize, residual: f64, radiosity: &[Rgb]) -> bool {
-        (self.progress)(Progress::Solve { iteration, residual });
+        (self.progress)(Progress::Solve {
+            iteration,
+            residual,
+        });
         (self.progress)(Progress::Estimate { radiosity });
-        residual <= self.settings.tolerance || iteration >= self.settings.max_iterations || !residual.is_finite()
+        residual <= self.settings.tolerance
+            || iteration >= self.settings.max_iterations
+            || !residual.is_finite()
     }
 
     fn relative_residual(&self, radiosity: &[Rgb], r: &mut [Rgb]) -> f64 {
@@ -219,7 +277,8 @@ impl Run<'_> {
                 return (iteration, residual);
             }
             for i in 0..radiosity.len() {
-                let updated = system.emission[i] + system.reflectance[i] * entries.gather_row(i, radiosity);
+                let updated =
+                    system.emission[i] + system.reflectance[i] * entries.gather_row(i, radiosity);
                 radiosity[i] += (updated - radiosity[i]) * omega;
             }
             iteration += 1;
@@ -247,7 +306,9 @@ impl Run<'_> {
             }
             let unshot = std::mem::take(&mut r[shooter]);
             radiosity[shooter] += unshot;
-            entries.for_each_in_column(shooter, &mut |i, f| r[i] += system.reflectance[i] * unshot * f);
+            entries.for_each_in_column(shooter, &mut |i, f| {
+                r[i] += system.reflectance[i] * unshot * f
+            });
             iteration += 1;
         }
     }
@@ -281,9 +342,15 @@ impl Run<'_> {
             let mut g = vec![beta];
             for k in 0..RESTART {
                 // w = D M D^-1 v_k
-                unscaled.iter_mut().zip(&basis[k]).zip(&scale).for_each(|((u, v), s)| *u = *v / *s);
+                unscaled
+                    .iter_mut()
+                    .zip(&basis[k])
+                    .zip(&scale)
+                    .for_each(|((u, v), s)| *u = *v / *s);
                 self.transport.gather(&unscaled, &mut product);
-                let mut w: Vec<Rgb> = (0..n).map(|i| (unscaled[i] - system.reflectance[i] * product[i]) * scale[i]).collect();
+                let mut w: Vec<Rgb> = (0..n)
+                    .map(|i| (unscaled[i] - system.reflectance[i] * product[i]) * scale[i])
+                    .collect();
                 iteration += 1;
                 // Modified Gram-Schmidt.
                 let mut column = Vec::with_capacity(k + 2);
@@ -302,7 +369,11 @@ impl Run<'_> {
                     column[i + 1] = -sines[i] * a + cosines[i] * b;
                 }
                 let radius = (column[k] * column[k] + column[k + 1] * column[k + 1]).map(f64::sqrt);
-                let cosine = Rgb::select(radius.cmpeq(Rgb::ZERO), Rgb::ONE, safe_div(column[k], radius));
+                let cosine = Rgb::select(
+                    radius.cmpeq(Rgb::ZERO),
+                    Rgb::ONE,
+                    safe_div(column[k], radius),
+                );
                 let sine = safe_div(column[k + 1], radius);
                 column[k] = cosine * column[k] + sine * column[k + 1];
                 column[k + 1] = Rgb::ZERO;
@@ -312,12 +383,17 @@ impl Run<'_> {
                 sines.push(sine);
                 hessenberg.push(column);
                 let estimate = g[k + 1].length();
-                (self.progress)(Progress::Solve { iteration, residual: estimate / self.emission_norm });
+                (self.progress)(Progress::Solve {
+                    iteration,
+                    residual: estimate / self.emission_norm,
+                });
                 let stop = estimate <= target || iteration >= self.settings.max_iterations;
                 if !stop {
                     // The iterate so far, for progressive display: O(n k) beside the O(n^2) product.
                     let current = self.iterate(radiosity, &hessenberg, &g, &basis, &scale);
-                    (self.progress)(Progress::Estimate { radiosity: &current });
+                    (self.progress)(Progress::Estimate {
+                        radiosity: &current,
+                    });
                 } else {
                     break;
                 }

@@ -7,7 +7,9 @@
 use crate::scene::Scene;
 use glam::{DVec3, Vec3A};
 use obvhs::bvh2::{Bvh2, builder::build_bvh2};
-use obvhs::{Boundable, BvhBuildParams, aabb::Aabb, cwbvh::CwBvh, cwbvh::builder::build_cwbvh, ray::Ray};
+use obvhs::{
+    Boundable, BvhBuildParams, aabb::Aabb, cwbvh::CwBvh, cwbvh::builder::build_cwbvh, ray::Ray,
+};
 use std::time::Duration;
 
 /// One input face as an occluder, in f32 relative to the scene centre.
@@ -103,7 +105,9 @@ impl Occluders {
 
     /// Builds the given kind of index over every face of `scene`.
     pub fn with_backend(scene: &Scene, backend: RayBackend) -> Self {
-        let (centre, diagonal) = scene.bounds().map_or((DVec3::ZERO, 0.0), |(lo, hi)| ((lo + hi) * 0.5, (hi - lo).length()));
+        let (centre, diagonal) = scene.bounds().map_or((DVec3::ZERO, 0.0), |(lo, hi)| {
+            ((lo + hi) * 0.5, (hi - lo).length())
+        });
         let faces: Vec<OccluderFace> = scene
             .faces
             .iter()
@@ -113,24 +117,46 @@ impl Occluders {
                 for (slot, p) in corners.iter_mut().zip(c) {
                     *slot = Vec3A::from((*p - centre).as_vec3());
                 }
-                OccluderFace { corners, arity: c.len(), normal: Vec3A::from(face.polygon.normal().as_vec3()) }
+                OccluderFace {
+                    corners,
+                    arity: c.len(),
+                    normal: Vec3A::from(face.polygon.normal().as_vec3()),
+                }
             })
             .collect();
         let params = BvhBuildParams::medium_build();
         let index = match backend {
             _ if faces.is_empty() => Index::Linear,
-            RayBackend::CwBvh => Index::CwBvh(build_cwbvh(&faces, params, &mut Duration::default())),
+            RayBackend::CwBvh => {
+                Index::CwBvh(build_cwbvh(&faces, params, &mut Duration::default()))
+            }
             RayBackend::Bvh2 => Index::Bvh2(build_bvh2(&faces, params, &mut Duration::default())),
             RayBackend::Linear => Index::Linear,
         };
-        Occluders { index, faces, centre, start_offset: 1e-6 * diagonal as f32 }
+        Occluders {
+            index,
+            faces,
+            centre,
+            start_offset: 1e-6 * diagonal as f32,
+        }
     }
 
     /// The nearest face along the ray from `origin` in the unit `direction`, ignoring face
     /// `ignore` (the one the ray starts on).
     pub fn closest_hit(&self, origin: DVec3, direction: DVec3, ignore: u32) -> Option<Hit> {
-        let ray = Ray::new(Vec3A::from((origin - self.centre).as_vec3()), ray_direction(direction), self.start_offset, f32::INFINITY);
-        let hit = |ray: &Ray, face: u32| if face == ignore { f32::INFINITY } else { self.faces[face as usize].intersect(ray) };
+        let ray = Ray::new(
+            Vec3A::from((origin - self.centre).as_vec3()),
+            ray_direction(direction),
+            self.start_offset,
+            f32::INFINITY,
+        );
+        let hit = |ray: &Ray, face: u32| {
+            if face == ignore {
+                f32::INFINITY
+            } else {
+                self.faces[face as usize].intersect(ray)
+            }
+        };
         let (mut best_face, mut best_t) = (u32::MAX, f32::INFINITY);
         let mut consider = |face: u32, t: f32| {
             if t < best_t {
@@ -140,17 +166,29 @@ impl Occluders {
         match &self.index {
             Index::CwBvh(bvh) => {
                 let mut record = obvhs::ray::RayHit::none();
-                if bvh.ray_traverse(ray, &mut record, |ray, id| hit(ray, bvh.primitive_indices[id])) {
-                    consider(bvh.primitive_indices[record.primitive_id as usize], record.t);
+                if bvh.ray_traverse(ray, &mut record, |ray, id| {
+                    hit(ray, bvh.primitive_indices[id])
+                }) {
+                    consider(
+                        bvh.primitive_indices[record.primitive_id as usize],
+                        record.t,
+                    );
                 }
             }
             Index::Bvh2(bvh) => {
                 let mut record = obvhs::ray::RayHit::none();
-                if bvh.ray_traverse(ray, &mut record, |ray, id| hit(ray, bvh.primitive_indices[id])) {
-                    consider(bvh.primitive_indices[record.primitive_id as usize], record.t);
+                if bvh.ray_traverse(ray, &mut record, |ray, id| {
+                    hit(ray, bvh.primitive_indices[id])
+                }) {
+                    consider(
+                        bvh.primitive_indices[record.primitive_id as usize],
+                        record.t,
+                    );
                 }
             }
-            Index::Linear => (0..self.faces.len() as u32).for_each(|face| consider(face, hit(&ray, face))),
+            Index::Linear => {
+                (0..self.faces.len() as u32).for_each(|face| consider(face, hit(&ray, face)))
+            }
         }
         (best_face != u32::MAX).then(|| Hit {
             face: best_face,
@@ -163,14 +201,29 @@ impl Occluders {
     /// segment between two of their points cannot cross) lies between `from` and `to`.
     pub fn segment_is_clear(&self, from: DVec3, to: DVec3, ignore: [u32; 2]) -> bool {
         let origin = Vec3A::from((from - self.centre).as_vec3());
-        let ray = Ray::new(origin, ray_direction(to - from), SEGMENT_END_MARGIN, 1.0 - SEGMENT_END_MARGIN);
+        let ray = Ray::new(
+            origin,
+            ray_direction(to - from),
+            SEGMENT_END_MARGIN,
+            1.0 - SEGMENT_END_MARGIN,
+        );
         let hit = |ray: &Ray, face: u32| {
-            if face == ignore[0] || face == ignore[1] { f32::INFINITY } else { self.faces[face as usize].intersect(ray) }
+            if face == ignore[0] || face == ignore[1] {
+                f32::INFINITY
+            } else {
+                self.faces[face as usize].intersect(ray)
+            }
         };
         match &self.index {
-            Index::CwBvh(bvh) => bvh.ray_traverse_miss(ray, |ray, id| hit(ray, bvh.primitive_indices[id])),
-            Index::Bvh2(bvh) => bvh.ray_traverse_miss(ray, |ray, id| hit(ray, bvh.primitive_indices[id])),
-            Index::Linear => (0..self.faces.len() as u32).all(|face| hit(&ray, face) == f32::INFINITY),
+            Index::CwBvh(bvh) => {
+                bvh.ray_traverse_miss(ray, |ray, id| hit(ray, bvh.primitive_indices[id]))
+            }
+            Index::Bvh2(bvh) => {
+                bvh.ray_traverse_miss(ray, |ray, id| hit(ray, bvh.primitive_indices[id]))
+            }
+            Index::Linear => {
+                (0..self.faces.len() as u32).all(|face| hit(&ray, face) == f32::INFINITY)
+            }
         }
     }
 }
@@ -185,22 +238,45 @@ mod tests {
     fn a_wall_between_two_points_blocks_and_its_own_faces_do_not() {
         let mut scene = Scene::default();
         let wall = scene.add_object("wall");
-        let material = Material { reflectance: Rgb::splat(0.5), emission: Rgb::ZERO };
-        scene.add_polygon(wall, &[dvec3(-1.0, -1.0, 0.0), dvec3(1.0, -1.0, 0.0), dvec3(1.0, 1.0, 0.0), dvec3(-1.0, 1.0, 0.0)], material);
+        let material = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        scene.add_polygon(
+            wall,
+            &[
+                dvec3(-1.0, -1.0, 0.0),
+                dvec3(1.0, -1.0, 0.0),
+                dvec3(1.0, 1.0, 0.0),
+                dvec3(-1.0, 1.0, 0.0),
+            ],
+            material,
+        );
         for backend in [RayBackend::CwBvh, RayBackend::Bvh2, RayBackend::Linear] {
-        let occluders = Occluders::with_backend(&scene, backend);
-        let (a, b) = (dvec3(0.0, 0.0, -1.0), dvec3(0.0, 0.0, 1.0));
-        assert!(!occluders.segment_is_clear(a, b, [u32::MAX, u32::MAX]));
-        assert!(occluders.segment_is_clear(a, b, [0, u32::MAX]));
-        assert!(occluders.segment_is_clear(dvec3(2.0, 0.0, -1.0), dvec3(2.0, 0.0, 1.0), [u32::MAX, u32::MAX]));
-        // A segment that stops short of the wall is clear.
-        assert!(occluders.segment_is_clear(a, dvec3(0.0, 0.0, -0.1), [u32::MAX, u32::MAX]));
-        // The wall faces +z: from below a ray meets its back, from above its front.
-        let up = occluders.closest_hit(a, DVec3::Z, u32::MAX).expect("hits the wall");
-        assert_eq!((up.face, up.front), (0, false));
-        assert!((up.distance - 1.0).abs() < 1e-6);
-        assert!(occluders.closest_hit(b, -DVec3::Z, u32::MAX).unwrap_or_else(|| panic!("{backend:?} misses")).front);
-        assert_eq!(occluders.closest_hit(a, DVec3::X, u32::MAX), None);
+            let occluders = Occluders::with_backend(&scene, backend);
+            let (a, b) = (dvec3(0.0, 0.0, -1.0), dvec3(0.0, 0.0, 1.0));
+            assert!(!occluders.segment_is_clear(a, b, [u32::MAX, u32::MAX]));
+            assert!(occluders.segment_is_clear(a, b, [0, u32::MAX]));
+            assert!(occluders.segment_is_clear(
+                dvec3(2.0, 0.0, -1.0),
+                dvec3(2.0, 0.0, 1.0),
+                [u32::MAX, u32::MAX]
+            ));
+            // A segment that stops short of the wall is clear.
+            assert!(occluders.segment_is_clear(a, dvec3(0.0, 0.0, -0.1), [u32::MAX, u32::MAX]));
+            // The wall faces +z: from below a ray meets its back, from above its front.
+            let up = occluders
+                .closest_hit(a, DVec3::Z, u32::MAX)
+                .expect("hits the wall");
+            assert_eq!((up.face, up.front), (0, false));
+            assert!((up.distance - 1.0).abs() < 1e-6);
+            assert!(
+                occluders
+                    .closest_hit(b, -DVec3::Z, u32::MAX)
+                    .unwrap_or_else(|| panic!("{backend:?} misses"))
+                    .front
+            );
+            assert_eq!(occluders.closest_hit(a, DVec3::X, u32::MAX), None);
         }
     }
 }

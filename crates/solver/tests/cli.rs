@@ -15,14 +15,29 @@ fn radcast_json(args: &[&str]) -> (serde_json::Value, String) {
     let output = radcast(args);
     let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
     assert!(output.status.success(), "{stderr}");
-    (serde_json::from_slice(&output.stdout).expect("one JSON object on stdout"), stderr)
+    (
+        serde_json::from_slice(&output.stdout).expect("one JSON object on stdout"),
+        stderr,
+    )
 }
 
 #[test]
 fn solve_json_reports_every_promised_field() {
-    let (report, _) = radcast_json(&["solve", "scenes/cornell-box.obj", "--patches", "200", "--method", "gauss-seidel", "--json"]);
+    let (report, _) = radcast_json(&[
+        "solve",
+        "scenes/cornell-box.obj",
+        "--patches",
+        "200",
+        "--method",
+        "gauss-seidel",
+        "--json",
+    ]);
     assert_eq!(report["method"], "gauss-seidel");
-    assert!(report["patches"].as_u64().unwrap().abs_diff(200) <= 20, "{}", report["patches"]);
+    assert!(
+        report["patches"].as_u64().unwrap().abs_diff(200) <= 20,
+        "{}",
+        report["patches"]
+    );
     assert_eq!(report["triangles"], 38);
     assert!(report["iterations"].as_u64().unwrap() > 0);
     assert!(report["residual"].as_f64().unwrap() <= 1e-6);
@@ -30,12 +45,32 @@ fn solve_json_reports_every_promised_field() {
         assert!(report["seconds"][stage].as_f64().unwrap() >= 0.0, "{stage}");
     }
     let objects = report["objects"].as_array().unwrap();
-    let names: Vec<_> = objects.iter().map(|o| o["name"].as_str().unwrap()).collect();
-    assert_eq!(names, ["floor", "ceiling", "light", "back_wall", "right_wall", "left_wall", "short_block", "tall_block"]);
+    let names: Vec<_> = objects
+        .iter()
+        .map(|o| o["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "floor",
+            "ceiling",
+            "light",
+            "back_wall",
+            "right_wall",
+            "left_wall",
+            "short_block",
+            "tall_block"
+        ]
+    );
     // The red wall is red and the green wall green: colour bleeding from the published materials.
     let rgb = |name: &str| -> Vec<f64> {
         let o = objects.iter().find(|o| o["name"] == name).unwrap();
-        o["radiosity"].as_array().unwrap().iter().map(|c| c.as_f64().unwrap()).collect()
+        o["radiosity"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_f64().unwrap())
+            .collect()
     };
     assert!(rgb("left_wall")[0] > 5.0 * rgb("left_wall")[1]);
     assert!(rgb("right_wall")[1] > 2.0 * rgb("right_wall")[0]);
@@ -49,7 +84,10 @@ fn bad_input_exits_non_zero_with_the_reason() {
     let output = radcast(&["solve", "scenes/does-not-exist.obj"]);
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(stderr.contains("scenes/does-not-exist.obj: cannot read"), "{stderr}");
+    assert!(
+        stderr.contains("scenes/does-not-exist.obj: cannot read"),
+        "{stderr}"
+    );
 
     let output = radcast(&["solve", "scenes/cornell-box.obj", "--method", "magic"]);
     assert!(!output.status.success());
@@ -58,21 +96,44 @@ fn bad_input_exits_non_zero_with_the_reason() {
 
     let output = radcast(&["solve", "scenes/cornell-box.obj", "--tolerance", "NaN"]);
     assert!(!output.status.success());
-    assert!(String::from_utf8_lossy(&output.stderr).contains("--tolerance must be in (0, 1), got NaN"));
+    assert!(
+        String::from_utf8_lossy(&output.stderr).contains("--tolerance must be in (0, 1), got NaN")
+    );
 
-    let output = radcast(&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--error", "0"]);
+    let output = radcast(&[
+        "solve",
+        "scenes/cornell-box.obj",
+        "--method",
+        "hierarchical",
+        "--error",
+        "0",
+    ]);
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("--error must be in (0, 1), got 0"));
 }
 
 #[test]
 fn hierarchical_json_adds_elements_links_and_peak_memory() {
-    let (report, _) = radcast_json(&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--error", "0.2", "--json"]);
+    let (report, _) = radcast_json(&[
+        "solve",
+        "scenes/cornell-box.obj",
+        "--method",
+        "hierarchical",
+        "--error",
+        "0.2",
+        "--json",
+    ]);
     assert_eq!(report["method"], "hierarchical");
-    let (elements, links) = (report["elements"].as_u64().unwrap(), report["links"].as_u64().unwrap());
+    let (elements, links) = (
+        report["elements"].as_u64().unwrap(),
+        report["links"].as_u64().unwrap(),
+    );
     // The leaves are the patches; each input face is at least one.
     assert_eq!(report["patches"].as_u64(), Some(elements));
-    assert!(elements >= 20 && links > elements, "{elements} leaves, {links} links");
+    assert!(
+        elements >= 20 && links > elements,
+        "{elements} leaves, {links} links"
+    );
     assert!(report["peak_memory_bytes"].as_u64().unwrap() > 0);
     assert!(report["residual"].as_f64().unwrap() <= 1e-6);
 }
@@ -81,8 +142,20 @@ fn hierarchical_json_adds_elements_links_and_peak_memory() {
 fn generate_writes_a_room_that_loads() {
     let folder = std::env::temp_dir().join(format!("radcast-generate-{}", std::process::id()));
     let out = folder.join("room.obj");
-    let output = radcast(&["generate", "--pieces", "30", "--seed", "5", "--out", out.to_str().unwrap()]);
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let output = radcast(&[
+        "generate",
+        "--pieces",
+        "30",
+        "--seed",
+        "5",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
     let stderr = String::from_utf8_lossy(&output.stderr);
     // 30 pieces, floor, ceiling, walls and one lamp per 4 m of a 10.25 m square ceiling (3 x 3).
     assert!(stderr.contains(": 42 objects,"), "{stderr}");
@@ -93,35 +166,114 @@ fn generate_writes_a_room_that_loads() {
 #[test]
 fn bench_error_writes_its_table_and_plot_under_the_given_name() {
     let folder = std::env::temp_dir().join(format!("radcast-bench-{}", std::process::id()));
-    let args = ["bench", "--error", "scenes/shadow-slab.obj", "--counts", "60", "--sweep-rays", "1", "--sweep-error", "0.3", "--repeat", "1"];
-    let output = radcast(&[&args[..], &["--out-dir", folder.to_str().unwrap(), "--name", "slab-check"]].concat());
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    let table = std::fs::read_to_string(folder.join("slab-check.md")).expect("the table is written");
+    let args = [
+        "bench",
+        "--error",
+        "scenes/shadow-slab.obj",
+        "--counts",
+        "60",
+        "--sweep-rays",
+        "1",
+        "--sweep-error",
+        "0.3",
+        "--repeat",
+        "1",
+    ];
+    let output = radcast(
+        &[
+            &args[..],
+            &[
+                "--out-dir",
+                folder.to_str().unwrap(),
+                "--name",
+                "slab-check",
+            ],
+        ]
+        .concat(),
+    );
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let table =
+        std::fs::read_to_string(folder.join("slab-check.md")).expect("the table is written");
     assert!(table.contains("--repeat 1 --name slab-check`"), "{table}");
-    assert!(table.contains("Plot: [slab-check.svg](slab-check.svg)"), "{table}");
+    assert!(
+        table.contains("Plot: [slab-check.svg](slab-check.svg)"),
+        "{table}"
+    );
     assert!(table.contains("| hierarchical E=0.3 |"), "{table}");
-    assert!(std::fs::read_to_string(folder.join("slab-check.svg")).expect("the plot is written").starts_with("<svg"));
+    assert!(
+        std::fs::read_to_string(folder.join("slab-check.svg"))
+            .expect("the plot is written")
+            .starts_with("<svg")
+    );
     std::fs::remove_dir_all(&folder).unwrap();
 }
 
 #[test]
 fn a_leaf_budget_coarsens_the_knob_and_says_so() {
-    let solve = |error: &str, extra: &[&str]| radcast_json(&[&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--json", "--error", error], extra].concat());
+    let solve = |error: &str, extra: &[&str]| {
+        radcast_json(
+            &[
+                &[
+                    "solve",
+                    "scenes/cornell-box.obj",
+                    "--method",
+                    "hierarchical",
+                    "--json",
+                    "--error",
+                    error,
+                ],
+                extra,
+            ]
+            .concat(),
+        )
+    };
     let (free, quiet) = solve("0.1", &[]);
-    assert_eq!((free["knob_used"].as_f64(), free["leaf_budget_reached"].as_bool()), (Some(0.1), Some(false)));
+    assert_eq!(
+        (
+            free["knob_used"].as_f64(),
+            free["leaf_budget_reached"].as_bool()
+        ),
+        (Some(0.1), Some(false))
+    );
     assert!(!quiet.contains("warning"), "{quiet}");
     // Half the leaves the knob wants: the whole refinement runs again at 0.2, within budget.
     let budget = free["elements"].as_u64().unwrap() / 2;
     let (bounded, warned) = solve("0.1", &["--max-leaves", &budget.to_string()]);
-    assert_eq!((bounded["knob_used"].as_f64(), bounded["leaf_budget_reached"].as_bool()), (Some(0.2), Some(false)));
+    assert_eq!(
+        (
+            bounded["knob_used"].as_f64(),
+            bounded["leaf_budget_reached"].as_bool()
+        ),
+        (Some(0.2), Some(false))
+    );
     assert!(bounded["elements"].as_u64().unwrap() <= budget);
     assert!(warned.contains(&format!("warning: --error 0.1 needs more than --max-leaves {budget} leaves here; refined at --error 0.2 instead")), "{warned}");
     // Past a knob of 0.5 there is nothing coarser to try: elements stop splitting at the budget.
     let (frozen, warned) = solve("0.6", &["--max-leaves", "60"]);
-    assert_eq!((frozen["knob_used"].as_f64(), frozen["leaf_budget_reached"].as_bool()), (Some(0.6), Some(true)));
+    assert_eq!(
+        (
+            frozen["knob_used"].as_f64(),
+            frozen["leaf_budget_reached"].as_bool()
+        ),
+        (Some(0.6), Some(true))
+    );
     assert!(frozen["elements"].as_u64().unwrap() <= 60);
-    assert!(warned.contains("warning: refinement stopped at --max-leaves 60 even at --error 0.6"), "{warned}");
-    let refused = radcast(&["solve", "scenes/cornell-box.obj", "--method", "hierarchical", "--max-leaves", "0"]);
+    assert!(
+        warned.contains("warning: refinement stopped at --max-leaves 60 even at --error 0.6"),
+        "{warned}"
+    );
+    let refused = radcast(&[
+        "solve",
+        "scenes/cornell-box.obj",
+        "--method",
+        "hierarchical",
+        "--max-leaves",
+        "0",
+    ]);
     assert!(!refused.status.success());
     assert!(String::from_utf8_lossy(&refused.stderr).contains("--max-leaves must be at least 1"));
 }

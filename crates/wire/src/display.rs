@@ -19,19 +19,31 @@ fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
 }
 
 fn cross_length(a: [f32; 3], b: [f32; 3]) -> f32 {
-    let c = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    let c = [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ];
     (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
 }
 
 /// The used corners of a patch: three or four.
 pub fn corners(patch: &[u32; 4]) -> &[u32] {
-    if patch[3] == NO_CORNER { &patch[..3] } else { &patch[..] }
+    if patch[3] == NO_CORNER {
+        &patch[..3]
+    } else {
+        &patch[..]
+    }
 }
 
 /// Area of patch `i` of `geometry`, scene units squared.
 pub fn patch_area(geometry: &Geometry, patch: &[u32; 4]) -> f32 {
     let p = |i: usize| geometry.positions[patch[i] as usize];
-    if patch[3] == NO_CORNER { 0.5 * cross_length(sub(p(1), p(0)), sub(p(2), p(0))) } else { 0.5 * cross_length(sub(p(2), p(0)), sub(p(3), p(1))) }
+    if patch[3] == NO_CORNER {
+        0.5 * cross_length(sub(p(1), p(0)), sub(p(2), p(0)))
+    } else {
+        0.5 * cross_length(sub(p(2), p(0)), sub(p(3), p(1)))
+    }
 }
 
 /// Radiosity at every corner: the area-weighted mean of the patches around it.
@@ -45,7 +57,15 @@ pub fn corner_radiosity(geometry: &Geometry, patch_radiosity: &[Rgb]) -> Vec<Rgb
             *weight += area;
         }
     }
-    sums.into_iter().map(|(sum, area)| if area > 0.0 { sum.map(|s| s / area) } else { [0.0; 3] }).collect()
+    sums.into_iter()
+        .map(|(sum, area)| {
+            if area > 0.0 {
+                sum.map(|s| s / area)
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect()
 }
 
 /// Rec. 709 luminance.
@@ -81,6 +101,10 @@ pub fn tone_map(rgb: Rgb, exposure: f32) -> Rgb {
 /// Encodes a linear display value in [0, 1] as an 8-bit sRGB byte.
 pub fn srgb_byte(linear: f32) -> u8 {
     let c = linear.clamp(0.0, 1.0);
-    let encoded = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+    let encoded = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
     (encoded * 255.0 + 0.5) as u8
 }

@@ -25,8 +25,11 @@ const KIND_GEOMETRY_CHANGED: u8 = 4;
 const KIND_REQUEST_FULL: u8 = 16;
 
 /// Fixed-width little-endian integers: every header has one fixed layout (docs/PROTOCOL.md).
-pub(crate) fn config() -> bincode::config::Configuration<bincode::config::LittleEndian, bincode::config::Fixint> {
-    bincode::config::standard().with_fixed_int_encoding().with_little_endian()
+pub(crate) fn config()
+-> bincode::config::Configuration<bincode::config::LittleEndian, bincode::config::Fixint> {
+    bincode::config::standard()
+        .with_fixed_int_encoding()
+        .with_little_endian()
 }
 
 /// The first message on every connection.
@@ -140,7 +143,8 @@ fn push_payload(out: &mut Vec<u8>, payload: &[u8]) -> u8 {
 
 fn encode_header(kind: u8, flags: u8, header: impl Encode) -> Vec<u8> {
     let mut out = vec![kind, flags];
-    bincode::encode_into_std_write(header, &mut out, config()).expect("writing to a Vec cannot fail");
+    bincode::encode_into_std_write(header, &mut out, config())
+        .expect("writing to a Vec cannot fail");
     out
 }
 
@@ -149,7 +153,9 @@ impl ServerMessage {
     pub fn encode(&self) -> Vec<u8> {
         match self {
             ServerMessage::Hello(hello) => encode_header(KIND_HELLO, 0, hello),
-            ServerMessage::GeometryChanged { geometry_version } => encode_header(KIND_GEOMETRY_CHANGED, 0, geometry_version),
+            ServerMessage::GeometryChanged { geometry_version } => {
+                encode_header(KIND_GEOMETRY_CHANGED, 0, geometry_version)
+            }
             ServerMessage::Full(frame) => {
                 let info = &frame.info;
                 let header = FullHeader {
@@ -197,7 +203,10 @@ impl ServerMessage {
                 let (hello, used): (Hello, usize) = decode_header(rest)?;
                 expect_end(&rest[used..])?;
                 if hello.protocol_version != PROTOCOL_VERSION {
-                    return Err(DecodeError::UnsupportedVersion { got: hello.protocol_version, supported: PROTOCOL_VERSION });
+                    return Err(DecodeError::UnsupportedVersion {
+                        got: hello.protocol_version,
+                        supported: PROTOCOL_VERSION,
+                    });
                 }
                 Ok(ServerMessage::Hello(hello))
             }
@@ -208,27 +217,60 @@ impl ServerMessage {
                 let expected = header.patch_count as usize * 4;
                 let payload = take_payload(&rest[used..], flags, expected)?;
                 if payload.len() != expected {
-                    return Err(DecodeError::Length { what: "full frame colours", expected, got: payload.len() });
+                    return Err(DecodeError::Length {
+                        what: "full frame colours",
+                        expected,
+                        got: payload.len(),
+                    });
                 }
-                let info = frame_info(header.solution_version, header.sent_at_unix_micros, header.scale, header.patch_count, flags)?;
-                Ok(ServerMessage::Full(FullFrame { info, colours: read_codes(&payload) }))
+                let info = frame_info(
+                    header.solution_version,
+                    header.sent_at_unix_micros,
+                    header.scale,
+                    header.patch_count,
+                    flags,
+                )?;
+                Ok(ServerMessage::Full(FullFrame {
+                    info,
+                    colours: read_codes(&payload),
+                }))
             }
             KIND_DELTA => {
                 check_flags(flags, FLAG_COMPRESSED | FLAG_FINAL)?;
                 let (header, used): (DeltaHeader, usize) = decode_header(rest)?;
                 check_patch_count(header.patch_count)?;
                 if header.change_count > header.patch_count {
-                    return Err(DecodeError::TooLarge { what: "delta change count", size: header.change_count as u64, limit: header.patch_count as u64 });
+                    return Err(DecodeError::TooLarge {
+                        what: "delta change count",
+                        size: header.change_count as u64,
+                        limit: header.patch_count as u64,
+                    });
                 }
                 // Each change takes at most 5 varint bytes and 4 colour bytes.
                 let payload = take_payload(&rest[used..], flags, header.change_count as usize * 9)?;
-                let (indices, colour_bytes) = read_indices(&payload, header.change_count, header.patch_count)?;
+                let (indices, colour_bytes) =
+                    read_indices(&payload, header.change_count, header.patch_count)?;
                 let expected = header.change_count as usize * 4;
                 if colour_bytes.len() != expected {
-                    return Err(DecodeError::Length { what: "delta colours", expected, got: colour_bytes.len() });
+                    return Err(DecodeError::Length {
+                        what: "delta colours",
+                        expected,
+                        got: colour_bytes.len(),
+                    });
                 }
-                let info = frame_info(header.solution_version, header.sent_at_unix_micros, header.scale, header.patch_count, flags)?;
-                Ok(ServerMessage::Delta(DeltaFrame { base_version: header.base_version, info, indices, colours: read_codes(colour_bytes) }))
+                let info = frame_info(
+                    header.solution_version,
+                    header.sent_at_unix_micros,
+                    header.scale,
+                    header.patch_count,
+                    flags,
+                )?;
+                Ok(ServerMessage::Delta(DeltaFrame {
+                    base_version: header.base_version,
+                    info,
+                    indices,
+                    colours: read_codes(colour_bytes),
+                }))
             }
             KIND_GEOMETRY_CHANGED => {
                 check_flags(flags, 0)?;
@@ -266,33 +308,70 @@ impl ClientMessage {
 fn split_kind(bytes: &[u8]) -> Result<(u8, u8, &[u8]), DecodeError> {
     match bytes {
         [kind, flags, rest @ ..] => Ok((*kind, *flags, rest)),
-        _ => Err(DecodeError::Truncated { what: "message kind and flags", needed: 2, got: bytes.len() }),
+        _ => Err(DecodeError::Truncated {
+            what: "message kind and flags",
+            needed: 2,
+            got: bytes.len(),
+        }),
     }
 }
 
 fn check_flags(flags: u8, allowed: u8) -> Result<(), DecodeError> {
-    if flags & !allowed != 0 { Err(DecodeError::UnknownFlags(flags)) } else { Ok(()) }
+    if flags & !allowed != 0 {
+        Err(DecodeError::UnknownFlags(flags))
+    } else {
+        Ok(())
+    }
 }
 
 fn check_patch_count(count: u32) -> Result<(), DecodeError> {
-    if count > MAX_PATCHES { Err(DecodeError::TooLarge { what: "patch count", size: count as u64, limit: MAX_PATCHES as u64 }) } else { Ok(()) }
+    if count > MAX_PATCHES {
+        Err(DecodeError::TooLarge {
+            what: "patch count",
+            size: count as u64,
+            limit: MAX_PATCHES as u64,
+        })
+    } else {
+        Ok(())
+    }
 }
 
 /// The frame info shared by full and delta frames, with the scale checked.
-fn frame_info(solution_version: u64, sent_at_unix_micros: u64, scale: f32, patch_count: u32, flags: u8) -> Result<FrameInfo, DecodeError> {
+fn frame_info(
+    solution_version: u64,
+    sent_at_unix_micros: u64,
+    scale: f32,
+    patch_count: u32,
+    flags: u8,
+) -> Result<FrameInfo, DecodeError> {
     if !(scale.is_finite() && scale > 0.0) {
-        return Err(DecodeError::Invalid(format!("scale {scale} must be finite and positive")));
+        return Err(DecodeError::Invalid(format!(
+            "scale {scale} must be finite and positive"
+        )));
     }
-    Ok(FrameInfo { solution_version, sent_at_unix_micros, scale, patch_count, is_final: flags & FLAG_FINAL != 0 })
+    Ok(FrameInfo {
+        solution_version,
+        sent_at_unix_micros,
+        scale,
+        patch_count,
+        is_final: flags & FLAG_FINAL != 0,
+    })
 }
 
 /// Little-endian u32 codes (the caller has checked the length is a multiple of 4).
 fn read_codes(bytes: &[u8]) -> Vec<u32> {
-    bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+    bytes
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
 }
 
 fn expect_end(rest: &[u8]) -> Result<(), DecodeError> {
-    if rest.is_empty() { Ok(()) } else { Err(DecodeError::TrailingBytes(rest.len())) }
+    if rest.is_empty() {
+        Ok(())
+    } else {
+        Err(DecodeError::TrailingBytes(rest.len()))
+    }
 }
 
 fn decode_header<T: Decode<()>>(bytes: &[u8]) -> Result<(T, usize), DecodeError> {
@@ -306,16 +385,29 @@ fn take_payload(bytes: &[u8], flags: u8, limit: usize) -> Result<Cow<'_, [u8]>, 
         return Ok(Cow::Borrowed(bytes));
     }
     let [a, b, c, d, block @ ..] = bytes else {
-        return Err(DecodeError::Truncated { what: "compressed payload size", needed: 4, got: bytes.len() });
+        return Err(DecodeError::Truncated {
+            what: "compressed payload size",
+            needed: 4,
+            got: bytes.len(),
+        });
     };
     let size = u32::from_le_bytes([*a, *b, *c, *d]) as usize;
     if size > limit {
-        return Err(DecodeError::TooLarge { what: "uncompressed payload", size: size as u64, limit: limit as u64 });
+        return Err(DecodeError::TooLarge {
+            what: "uncompressed payload",
+            size: size as u64,
+            limit: limit as u64,
+        });
     }
     let mut out = vec![0; size];
-    let written = lz4_flex::block::decompress_into(block, &mut out).map_err(|e| DecodeError::Invalid(format!("LZ4 payload: {e}")))?;
+    let written = lz4_flex::block::decompress_into(block, &mut out)
+        .map_err(|e| DecodeError::Invalid(format!("LZ4 payload: {e}")))?;
     if written != size {
-        return Err(DecodeError::Length { what: "decompressed payload", expected: size, got: written });
+        return Err(DecodeError::Length {
+            what: "decompressed payload",
+            expected: size,
+            got: written,
+        });
     }
     Ok(Cow::Owned(out))
 }
@@ -329,13 +421,21 @@ fn write_varint(out: &mut Vec<u8>, mut value: u32) {
 }
 
 /// Reads `count` gap-encoded indices; returns them and the bytes after them.
-fn read_indices(bytes: &[u8], count: u32, patch_count: u32) -> Result<(Vec<u32>, &[u8]), DecodeError> {
+fn read_indices(
+    bytes: &[u8],
+    count: u32,
+    patch_count: u32,
+) -> Result<(Vec<u32>, &[u8]), DecodeError> {
     let mut indices = Vec::with_capacity(count as usize);
     let (mut position, mut next) = (0usize, 0u64);
     for _ in 0..count {
         let (mut gap, mut shift) = (0u64, 0);
         loop {
-            let &byte = bytes.get(position).ok_or(DecodeError::Truncated { what: "delta indices", needed: position + 1, got: bytes.len() })?;
+            let &byte = bytes.get(position).ok_or(DecodeError::Truncated {
+                what: "delta indices",
+                needed: position + 1,
+                got: bytes.len(),
+            })?;
             position += 1;
             gap |= ((byte & 0x7F) as u64) << shift;
             if byte & 0x80 == 0 {
@@ -343,7 +443,9 @@ fn read_indices(bytes: &[u8], count: u32, patch_count: u32) -> Result<(Vec<u32>,
             }
             shift += 7;
             if shift > 28 {
-                return Err(DecodeError::Invalid("delta index varint longer than 5 bytes".into()));
+                return Err(DecodeError::Invalid(
+                    "delta index varint longer than 5 bytes".into(),
+                ));
             }
         }
         let index = next + gap;

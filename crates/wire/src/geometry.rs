@@ -45,16 +45,20 @@ impl Geometry {
     /// The bytes served at `/api/scene`.
     pub fn encode(&self) -> Vec<u8> {
         let mut out = MAGIC.to_vec();
-        bincode::encode_into_std_write(self, &mut out, config()).expect("writing to a Vec cannot fail");
+        bincode::encode_into_std_write(self, &mut out, config())
+            .expect("writing to a Vec cannot fail");
         out
     }
 
     /// Parses and checks geometry; never panics, whatever the bytes.
     pub fn decode(bytes: &[u8]) -> Result<Geometry, DecodeError> {
-        let body = bytes.strip_prefix(MAGIC.as_slice()).ok_or(DecodeError::BadMagic)?;
+        let body = bytes
+            .strip_prefix(MAGIC.as_slice())
+            .ok_or(DecodeError::BadMagic)?;
         // A byte limit stops hostile length prefixes from allocating more than the input could hold.
         let limited = config().with_limit::<{ 1 << 30 }>();
-        let (geometry, used): (Geometry, usize) = bincode::decode_from_slice(body, limited).map_err(|e| DecodeError::Header(e.to_string()))?;
+        let (geometry, used): (Geometry, usize) = bincode::decode_from_slice(body, limited)
+            .map_err(|e| DecodeError::Header(e.to_string()))?;
         if used != body.len() {
             return Err(DecodeError::TrailingBytes(body.len() - used));
         }
@@ -65,22 +69,49 @@ impl Geometry {
     fn validate(&self) -> Result<(), DecodeError> {
         let patch_count = self.patches.len();
         if patch_count > MAX_PATCHES as usize {
-            return Err(DecodeError::TooLarge { what: "patch count", size: patch_count as u64, limit: MAX_PATCHES as u64 });
+            return Err(DecodeError::TooLarge {
+                what: "patch count",
+                size: patch_count as u64,
+                limit: MAX_PATCHES as u64,
+            });
         }
         if self.patch_objects.len() != patch_count {
-            return Err(DecodeError::Length { what: "patch objects", expected: patch_count, got: self.patch_objects.len() });
+            return Err(DecodeError::Length {
+                what: "patch objects",
+                expected: patch_count,
+                got: self.patch_objects.len(),
+            });
         }
-        if let Some(p) = self.positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        if let Some(p) = self
+            .positions
+            .iter()
+            .position(|p| !p.iter().all(|c| c.is_finite()))
+        {
             return Err(DecodeError::Invalid(format!("position {p} is not finite")));
         }
         for (i, corners) in self.patches.iter().enumerate() {
-            let used = if corners[3] == NO_CORNER { &corners[..3] } else { &corners[..] };
+            let used = if corners[3] == NO_CORNER {
+                &corners[..3]
+            } else {
+                &corners[..]
+            };
             if let Some(&bad) = used.iter().find(|&&c| c as usize >= self.positions.len()) {
-                return Err(DecodeError::Invalid(format!("patch {i} refers to vertex {bad} of {}", self.positions.len())));
+                return Err(DecodeError::Invalid(format!(
+                    "patch {i} refers to vertex {bad} of {}",
+                    self.positions.len()
+                )));
             }
         }
-        if let Some(i) = self.patch_objects.iter().position(|&o| o as usize >= self.objects.len()) {
-            return Err(DecodeError::Invalid(format!("patch {i} refers to object {} of {}", self.patch_objects[i], self.objects.len())));
+        if let Some(i) = self
+            .patch_objects
+            .iter()
+            .position(|&o| o as usize >= self.objects.len())
+        {
+            return Err(DecodeError::Invalid(format!(
+                "patch {i} refers to object {} of {}",
+                self.patch_objects[i],
+                self.objects.len()
+            )));
         }
         Ok(())
     }

@@ -38,18 +38,27 @@ pub fn encode_glb(geometry: &Geometry, patch_radiosity: &[[f32; 3]]) -> Vec<u8> 
     let corner_colours = corner_radiosity(geometry, patch_radiosity);
     let k = exposure(geometry, patch_radiosity);
     let mut bin: Vec<u8> = Vec::new();
-    let (mut views, mut accessors, mut meshes, mut nodes) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut views, mut accessors, mut meshes, mut nodes) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut view = |bin: &mut Vec<u8>, bytes: Vec<u8>, target: u32| {
         let offset = bin.len();
         bin.extend_from_slice(&bytes);
-        views.push(format!("{{\"buffer\":0,\"byteOffset\":{offset},\"byteLength\":{},\"target\":{target}}}", bytes.len()));
+        views.push(format!(
+            "{{\"buffer\":0,\"byteOffset\":{offset},\"byteLength\":{},\"target\":{target}}}",
+            bytes.len()
+        ));
         views.len() - 1
     };
     for (object_index, name) in geometry.objects.iter().enumerate() {
         // This object's corners, renumbered from zero.
         let mut local = vec![u32::MAX; geometry.positions.len()];
         let (mut positions, mut colours, mut indices) = (Vec::new(), Vec::new(), Vec::<u32>::new());
-        for (patch, _) in geometry.patches.iter().zip(&geometry.patch_objects).filter(|(_, o)| **o as usize == object_index) {
+        for (patch, _) in geometry
+            .patches
+            .iter()
+            .zip(&geometry.patch_objects)
+            .filter(|(_, o)| **o as usize == object_index)
+        {
             let ids: Vec<u32> = corners(patch)
                 .iter()
                 .map(|&c| {
@@ -68,13 +77,28 @@ pub fn encode_glb(geometry: &Geometry, patch_radiosity: &[[f32; 3]]) -> Vec<u8> 
         if indices.is_empty() {
             continue;
         }
-        let (lo, hi) = positions.iter().fold(([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]), |(lo, hi), p| {
-            (std::array::from_fn(|i| lo[i].min(p[i])), std::array::from_fn(|i| hi[i].max(p[i])))
-        });
-        let floats = |v: &[[f32; 3]]| v.iter().flatten().flat_map(|f| f.to_le_bytes()).collect::<Vec<u8>>();
+        let (lo, hi) = positions.iter().fold(
+            ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]),
+            |(lo, hi), p| {
+                (
+                    std::array::from_fn(|i| lo[i].min(p[i])),
+                    std::array::from_fn(|i| hi[i].max(p[i])),
+                )
+            },
+        );
+        let floats = |v: &[[f32; 3]]| {
+            v.iter()
+                .flatten()
+                .flat_map(|f| f.to_le_bytes())
+                .collect::<Vec<u8>>()
+        };
         let position_view = view(&mut bin, floats(&positions), ARRAY_BUFFER);
         let colour_view = view(&mut bin, floats(&colours), ARRAY_BUFFER);
-        let index_view = view(&mut bin, indices.iter().flat_map(|i| i.to_le_bytes()).collect(), ELEMENT_ARRAY_BUFFER);
+        let index_view = view(
+            &mut bin,
+            indices.iter().flat_map(|i| i.to_le_bytes()).collect(),
+            ELEMENT_ARRAY_BUFFER,
+        );
         let first = accessors.len();
         accessors.push(format!(
             "{{\"bufferView\":{position_view},\"componentType\":{FLOAT},\"count\":{},\"type\":\"VEC3\",\"min\":{lo:?},\"max\":{hi:?}}}",
@@ -88,7 +112,11 @@ pub fn encode_glb(geometry: &Geometry, patch_radiosity: &[[f32; 3]]) -> Vec<u8> 
             first + 1,
             first + 2
         ));
-        nodes.push(format!("{{\"name\":{},\"mesh\":{}}}", json_string(name), meshes.len() - 1));
+        nodes.push(format!(
+            "{{\"name\":{},\"mesh\":{}}}",
+            json_string(name),
+            meshes.len() - 1
+        ));
     }
     let node_ids: Vec<String> = (0..nodes.len()).map(|i| i.to_string()).collect();
     let mut json = format!(

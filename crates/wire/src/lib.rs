@@ -12,7 +12,9 @@ pub mod geometry;
 pub mod gltf;
 pub mod rgb9e5;
 
-pub use frame::{ClientMessage, DeltaFrame, FrameInfo, FullFrame, Hello, PROTOCOL_VERSION, ServerMessage};
+pub use frame::{
+    ClientMessage, DeltaFrame, FrameInfo, FullFrame, Hello, PROTOCOL_VERSION, ServerMessage,
+};
 pub use geometry::{Camera, Geometry};
 
 /// Why bytes could not be decoded. Decoders return these; they never panic.
@@ -100,7 +102,12 @@ pub fn scale_for(max_value: f32) -> f32 {
     if !(max_value.is_finite() && max_value > 0.0) {
         return 1.0;
     }
-    2f32.powi((max_value / rgb9e5::MAX_VALUE).log2().ceil().clamp(-100.0, 100.0) as i32)
+    2f32.powi(
+        (max_value / rgb9e5::MAX_VALUE)
+            .log2()
+            .ceil()
+            .clamp(-100.0, 100.0) as i32,
+    )
 }
 
 /// Encodes one radiosity (W/m^2) with a frame's scale.
@@ -146,8 +153,13 @@ impl PatchBuffer {
             }
             ServerMessage::Delta(delta) => {
                 let held = self.info.map(|i| i.solution_version);
-                if held != Some(delta.base_version) || self.colours.len() != delta.info.patch_count as usize {
-                    return Err(ApplyError::BaseMismatch { base: delta.base_version, held });
+                if held != Some(delta.base_version)
+                    || self.colours.len() != delta.info.patch_count as usize
+                {
+                    return Err(ApplyError::BaseMismatch {
+                        base: delta.base_version,
+                        held,
+                    });
                 }
                 for (&index, &colour) in delta.indices.iter().zip(&delta.colours) {
                     self.colours[index as usize] = colour;
@@ -161,11 +173,19 @@ impl PatchBuffer {
     /// Radiosity of every patch, W/m^2.
     pub fn radiosity(&self) -> Vec<[f32; 3]> {
         let scale = self.info.map_or(1.0, |info| info.scale);
-        self.colours.iter().map(|&c| decode_colour(c, scale)).collect()
+        self.colours
+            .iter()
+            .map(|&c| decode_colour(c, scale))
+            .collect()
     }
 }
 
 /// The delta from `old` to `new` (same length): the indices whose code changed.
 pub fn changes(old: &[u32], new: &[u32]) -> (Vec<u32>, Vec<u32>) {
-    old.iter().zip(new).enumerate().filter(|(_, (a, b))| a != b).map(|(i, (_, b))| (i as u32, *b)).unzip()
+    old.iter()
+        .zip(new)
+        .enumerate()
+        .filter(|(_, (a, b))| a != b)
+        .map(|(i, (_, b))| (i as u32, *b))
+        .unzip()
 }

@@ -26,11 +26,21 @@ pub const RELATIVE_ERROR_BOUND: f32 = 1.0 / 512.0;
 /// +infinity) clamp to it.
 pub fn encode(rgb: [f32; 3]) -> u32 {
     // NaN fails both comparisons inside `clamp`'s max/min pair, so filter it first.
-    let clamp = |c: f32| if c.is_nan() { 0.0 } else { c.clamp(0.0, MAX_VALUE) };
+    let clamp = |c: f32| {
+        if c.is_nan() {
+            0.0
+        } else {
+            c.clamp(0.0, MAX_VALUE)
+        }
+    };
     let [r, g, b] = rgb.map(clamp);
     let max = r.max(g).max(b);
     // floor(log2(max)), clamped below so that tiny values share the smallest exponent.
-    let floor_log2 = if max > 0.0 { max.log2().floor() as i32 } else { -EXPONENT_BIAS - 1 };
+    let floor_log2 = if max > 0.0 {
+        max.log2().floor() as i32
+    } else {
+        -EXPONENT_BIAS - 1
+    };
     let mut exponent = floor_log2.max(-EXPONENT_BIAS - 1) + 1 + EXPONENT_BIAS;
     let mut unit = 2f32.powi(exponent - EXPONENT_BIAS - MANTISSA_BITS);
     // Rounding the maximum may carry into the next exponent.
@@ -58,7 +68,10 @@ mod tests {
     fn within_bound(input: [f32; 3], output: [f32; 3]) -> bool {
         let max = input.iter().cloned().fold(0.0, f32::max);
         let bound = (RELATIVE_ERROR_BOUND * max).max(2f32.powi(-24));
-        input.iter().zip(output).all(|(i, o)| (i - o).abs() <= bound * 1.0001)
+        input
+            .iter()
+            .zip(output)
+            .all(|(i, o)| (i - o).abs() <= bound * 1.0001)
     }
 
     #[test]
@@ -66,12 +79,22 @@ mod tests {
         assert_eq!(decode(encode([0.0; 3])), [0.0; 3]);
         assert_eq!(decode(encode([1.0, 0.5, 0.25])), [1.0, 0.5, 0.25]);
         assert_eq!(decode(encode([MAX_VALUE; 3])), [MAX_VALUE; 3]);
-        assert_eq!(decode(encode([1e9, f32::INFINITY, 0.0])), [MAX_VALUE, MAX_VALUE, 0.0]);
-        assert_eq!(decode(encode([f32::NAN, -1.0, f32::NEG_INFINITY])), [0.0; 3]);
+        assert_eq!(
+            decode(encode([1e9, f32::INFINITY, 0.0])),
+            [MAX_VALUE, MAX_VALUE, 0.0]
+        );
+        assert_eq!(
+            decode(encode([f32::NAN, -1.0, f32::NEG_INFINITY])),
+            [0.0; 3]
+        );
         let tiny = [1e-6, 2e-6, 0.0];
         assert!(within_bound(tiny, decode(encode(tiny))));
         // Below the smallest unit, values round to zero or one unit; never negative or NaN.
-        assert!(decode(encode([1e-30; 3])).iter().all(|c| *c >= 0.0 && *c <= 2f32.powi(-24)));
+        assert!(
+            decode(encode([1e-30; 3]))
+                .iter()
+                .all(|c| *c >= 0.0 && *c <= 2f32.powi(-24))
+        );
     }
 
     #[test]

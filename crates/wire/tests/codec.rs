@@ -5,26 +5,55 @@ use wire::frame::{FLAG_COMPRESSED, MAX_PATCHES};
 use wire::*;
 
 fn info(version: u64, patch_count: u32, is_final: bool) -> FrameInfo {
-    FrameInfo { solution_version: version, sent_at_unix_micros: version.wrapping_add(1_700_000_000_000_000), scale: 0.5, patch_count, is_final }
+    FrameInfo {
+        solution_version: version,
+        sent_at_unix_micros: version.wrapping_add(1_700_000_000_000_000),
+        scale: 0.5,
+        patch_count,
+        is_final,
+    }
 }
 
 fn full(colours: Vec<u32>) -> ServerMessage {
-    ServerMessage::Full(FullFrame { info: info(7, colours.len() as u32, true), colours })
+    ServerMessage::Full(FullFrame {
+        info: info(7, colours.len() as u32, true),
+        colours,
+    })
 }
 
 #[test]
 fn hello_round_trips_and_other_versions_are_refused() {
-    let hello = Hello { protocol_version: PROTOCOL_VERSION, scene_id: 42, geometry_version: 3, patch_count: 600 };
+    let hello = Hello {
+        protocol_version: PROTOCOL_VERSION,
+        scene_id: 42,
+        geometry_version: 3,
+        patch_count: 600,
+    };
     let bytes = ServerMessage::Hello(hello).encode();
     assert_eq!(bytes.len(), 2 + 2 + 8 + 8 + 4);
-    assert_eq!(ServerMessage::decode(&bytes), Ok(ServerMessage::Hello(hello)));
-    let future = ServerMessage::Hello(Hello { protocol_version: 99, ..hello }).encode();
-    assert_eq!(ServerMessage::decode(&future), Err(DecodeError::UnsupportedVersion { got: 99, supported: PROTOCOL_VERSION }));
+    assert_eq!(
+        ServerMessage::decode(&bytes),
+        Ok(ServerMessage::Hello(hello))
+    );
+    let future = ServerMessage::Hello(Hello {
+        protocol_version: 99,
+        ..hello
+    })
+    .encode();
+    assert_eq!(
+        ServerMessage::decode(&future),
+        Err(DecodeError::UnsupportedVersion {
+            got: 99,
+            supported: PROTOCOL_VERSION
+        })
+    );
 }
 
 #[test]
 fn geometry_changes_round_trip() {
-    let message = ServerMessage::GeometryChanged { geometry_version: 7 };
+    let message = ServerMessage::GeometryChanged {
+        geometry_version: 7,
+    };
     let bytes = message.encode();
     assert_eq!(bytes, [4, 0, 7, 0, 0, 0, 0, 0, 0, 0]);
     assert_eq!(ServerMessage::decode(&bytes), Ok(message));
@@ -36,7 +65,9 @@ fn uniform_frames_compress_and_noisy_ones_do_not() {
     let uniform = full(vec![0x1234_5678; 10_000]).encode();
     assert_ne!(uniform[1] & FLAG_COMPRESSED, 0);
     assert!(uniform.len() < 1_000, "{} bytes", uniform.len());
-    let noisy: Vec<u32> = (0..10_000u32).map(|i| i.wrapping_mul(2_654_435_761)).collect();
+    let noisy: Vec<u32> = (0..10_000u32)
+        .map(|i| i.wrapping_mul(2_654_435_761))
+        .collect();
     let bytes = full(noisy.clone()).encode();
     assert_eq!(bytes[1] & FLAG_COMPRESSED, 0);
     assert_eq!(bytes.len(), 2 + 24 + 40_000);
@@ -45,11 +76,19 @@ fn uniform_frames_compress_and_noisy_ones_do_not() {
 
 #[test]
 fn truncation_anywhere_is_an_error_not_a_panic() {
-    let delta = ServerMessage::Delta(DeltaFrame { base_version: 1, info: info(2, 1000, false), indices: vec![0, 5, 999], colours: vec![1, 2, 3] });
+    let delta = ServerMessage::Delta(DeltaFrame {
+        base_version: 1,
+        info: info(2, 1000, false),
+        indices: vec![0, 5, 999],
+        colours: vec![1, 2, 3],
+    });
     for message in [full((0..100).collect()), delta] {
         let bytes = message.encode();
         for cut in 0..bytes.len() {
-            assert!(ServerMessage::decode(&bytes[..cut]).is_err(), "cut at {cut}");
+            assert!(
+                ServerMessage::decode(&bytes[..cut]).is_err(),
+                "cut at {cut}"
+            );
         }
         let mut longer = bytes.clone();
         longer.push(0);
@@ -62,19 +101,52 @@ fn hostile_sizes_and_indices_are_refused() {
     // A full frame claiming 2^26 + 1 patches.
     let mut bytes = full(vec![0; 4]).encode();
     bytes[2 + 20..2 + 24].copy_from_slice(&(MAX_PATCHES + 1).to_le_bytes());
-    assert_eq!(ServerMessage::decode(&bytes), Err(DecodeError::TooLarge { what: "patch count", size: MAX_PATCHES as u64 + 1, limit: MAX_PATCHES as u64 }));
+    assert_eq!(
+        ServerMessage::decode(&bytes),
+        Err(DecodeError::TooLarge {
+            what: "patch count",
+            size: MAX_PATCHES as u64 + 1,
+            limit: MAX_PATCHES as u64
+        })
+    );
     // A delta whose index is past the end.
-    let delta = DeltaFrame { base_version: 1, info: info(2, 10, false), indices: vec![3, 12], colours: vec![1, 2] };
+    let delta = DeltaFrame {
+        base_version: 1,
+        info: info(2, 10, false),
+        indices: vec![3, 12],
+        colours: vec![1, 2],
+    };
     let bytes = ServerMessage::Delta(delta).encode();
-    assert_eq!(ServerMessage::decode(&bytes), Err(DecodeError::IndexOutOfRange { index: 12, patch_count: 10 }));
+    assert_eq!(
+        ServerMessage::decode(&bytes),
+        Err(DecodeError::IndexOutOfRange {
+            index: 12,
+            patch_count: 10
+        })
+    );
     // A compressed payload that claims to inflate past what the header allows.
     let mut bytes = full(vec![7; 1000]).encode();
     assert_ne!(bytes[1] & FLAG_COMPRESSED, 0);
     bytes[26..30].copy_from_slice(&u32::MAX.to_le_bytes());
-    assert!(matches!(ServerMessage::decode(&bytes), Err(DecodeError::TooLarge { what: "uncompressed payload", .. })));
-    assert_eq!(ServerMessage::decode(&[9, 0]), Err(DecodeError::UnknownKind(9)));
-    assert_eq!(ServerMessage::decode(&[2, 0x80]), Err(DecodeError::UnknownFlags(0x80)));
-    assert_eq!(ClientMessage::decode(b"hello"), Err(DecodeError::UnknownKind(b'h')));
+    assert!(matches!(
+        ServerMessage::decode(&bytes),
+        Err(DecodeError::TooLarge {
+            what: "uncompressed payload",
+            ..
+        })
+    ));
+    assert_eq!(
+        ServerMessage::decode(&[9, 0]),
+        Err(DecodeError::UnknownKind(9))
+    );
+    assert_eq!(
+        ServerMessage::decode(&[2, 0x80]),
+        Err(DecodeError::UnknownFlags(0x80))
+    );
+    assert_eq!(
+        ClientMessage::decode(b"hello"),
+        Err(DecodeError::UnknownKind(b'h'))
+    );
 }
 
 #[test]
@@ -86,13 +158,27 @@ fn buffers_follow_full_and_delta_frames_and_refuse_foreign_bases() {
     let (indices, colours) = changes(&old, &new);
     assert_eq!(indices, [3, 49]);
     let mut buffer = PatchBuffer::default();
-    let delta = ServerMessage::Delta(DeltaFrame { base_version: 7, info: info(8, 50, true), indices, colours });
-    assert_eq!(buffer.apply(&delta), Err(ApplyError::BaseMismatch { base: 7, held: None }));
+    let delta = ServerMessage::Delta(DeltaFrame {
+        base_version: 7,
+        info: info(8, 50, true),
+        indices,
+        colours,
+    });
+    assert_eq!(
+        buffer.apply(&delta),
+        Err(ApplyError::BaseMismatch {
+            base: 7,
+            held: None
+        })
+    );
     buffer.apply(&full(old)).unwrap();
     buffer.apply(&delta).unwrap();
     assert_eq!(buffer.colours, new);
     assert_eq!(checksum(&buffer.colours), checksum(&new));
-    assert_ne!(checksum(&buffer.colours), checksum(&(0..50).collect::<Vec<_>>()));
+    assert_ne!(
+        checksum(&buffer.colours),
+        checksum(&(0..50).collect::<Vec<_>>())
+    );
 }
 
 #[test]
@@ -110,7 +196,10 @@ fn scaled_colours_keep_hdr_range_and_the_relative_bound() {
         let back = decode_colour(encode_colour(rgb, scale), scale);
         let max = rgb.iter().cloned().fold(0.0, f32::max);
         for (a, b) in rgb.iter().zip(back) {
-            assert!((a - b).abs() <= rgb9e5::RELATIVE_ERROR_BOUND * max, "{rgb:?} -> {back:?}");
+            assert!(
+                (a - b).abs() <= rgb9e5::RELATIVE_ERROR_BOUND * max,
+                "{rgb:?} -> {back:?}"
+            );
         }
     }
     assert_eq!(scale_for(0.0), 1.0);
@@ -120,11 +209,21 @@ fn scaled_colours_keep_hdr_range_and_the_relative_bound() {
 #[test]
 fn geometry_round_trips_and_bad_geometry_is_refused() {
     let geometry = Geometry {
-        positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+        positions: vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ],
         patches: vec![[0, 1, 2, 3], [0, 1, 2, geometry::NO_CORNER]],
         patch_objects: vec![0, 1],
         objects: vec!["floor".into(), "wall".into()],
-        camera: Some(Camera { eye: [0.0, 0.0, 5.0], target: [0.0; 3], up: [0.0, 1.0, 0.0], vertical_fov_degrees: 40.0 }),
+        camera: Some(Camera {
+            eye: [0.0, 0.0, 5.0],
+            target: [0.0; 3],
+            up: [0.0, 1.0, 0.0],
+            vertical_fov_degrees: 40.0,
+        }),
     };
     let bytes = geometry.encode();
     assert_eq!(Geometry::decode(&bytes), Ok(geometry.clone()));
@@ -132,10 +231,24 @@ fn geometry_round_trips_and_bad_geometry_is_refused() {
     for cut in 0..bytes.len() {
         assert!(Geometry::decode(&bytes[..cut]).is_err(), "cut at {cut}");
     }
-    let bad = Geometry { patches: vec![[0, 1, 9, 3], [0, 1, 2, geometry::NO_CORNER]], ..geometry.clone() };
-    assert_eq!(Geometry::decode(&bad.encode()), Err(DecodeError::Invalid("patch 0 refers to vertex 9 of 4".into())));
-    let nan = Geometry { positions: vec![[f32::NAN, 0.0, 0.0]; 4], ..geometry };
-    assert_eq!(Geometry::decode(&nan.encode()), Err(DecodeError::Invalid("position 0 is not finite".into())));
+    let bad = Geometry {
+        patches: vec![[0, 1, 9, 3], [0, 1, 2, geometry::NO_CORNER]],
+        ..geometry.clone()
+    };
+    assert_eq!(
+        Geometry::decode(&bad.encode()),
+        Err(DecodeError::Invalid(
+            "patch 0 refers to vertex 9 of 4".into()
+        ))
+    );
+    let nan = Geometry {
+        positions: vec![[f32::NAN, 0.0, 0.0]; 4],
+        ..geometry
+    };
+    assert_eq!(
+        Geometry::decode(&nan.encode()),
+        Err(DecodeError::Invalid("position 0 is not finite".into()))
+    );
 }
 
 proptest! {

@@ -5,7 +5,10 @@ use anyhow::{Context, bail};
 use plotters::prelude::*;
 use solver::accuracy::{SolutionError, evaluate};
 use solver::reference::Reference;
-use solver::{FormFactorSettings, HierarchySettings, Method, PatchTarget, Scene, SolveRequest, SolverSettings, solve_scene};
+use solver::{
+    FormFactorSettings, HierarchySettings, Method, PatchTarget, Scene, SolveRequest,
+    SolverSettings, solve_scene,
+};
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -27,8 +30,15 @@ struct Row {
 
 /// Where the reference of `scene` lives: `reference/<stem>.json` beside it.
 pub fn reference_path(scene: &Path) -> PathBuf {
-    let stem = scene.file_stem().and_then(|s| s.to_str()).unwrap_or("scene");
-    scene.parent().unwrap_or(Path::new(".")).join("reference").join(format!("{stem}.json"))
+    let stem = scene
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("scene");
+    scene
+        .parent()
+        .unwrap_or(Path::new("."))
+        .join("reference")
+        .join(format!("{stem}.json"))
 }
 
 pub fn load_reference(scene: &Path) -> anyhow::Result<Reference> {
@@ -36,7 +46,8 @@ pub fn load_reference(scene: &Path) -> anyhow::Result<Reference> {
     let text = std::fs::read_to_string(&path).with_context(|| {
         format!("{}: no reference; make one with `radcast reference {} --probes 1000 --samples 16384 --out {}`", path.display(), scene.display(), path.display())
     })?;
-    serde_json::from_str(&text).with_context(|| format!("{}: not a radcast reference", path.display()))
+    serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a radcast reference", path.display()))
 }
 
 fn median(mut values: Vec<f64>) -> f64 {
@@ -46,7 +57,15 @@ fn median(mut values: Vec<f64>) -> f64 {
 
 /// Runs the sweep and writes `<out_dir>/<name>.{md,svg}`: dense GMRES at each count and ray
 /// setting, the other solvers at the middle count, and the hierarchical path at each knob.
-pub fn run(scenes: &[PathBuf], counts: &[usize], rays: &[u32], errors: &[f64], repeat: usize, (out_dir, name): (&Path, &str), command: &str) -> anyhow::Result<()> {
+pub fn run(
+    scenes: &[PathBuf],
+    counts: &[usize],
+    rays: &[u32],
+    errors: &[f64],
+    repeat: usize,
+    (out_dir, name): (&Path, &str),
+    command: &str,
+) -> anyhow::Result<()> {
     if scenes.is_empty() {
         bail!("name at least one scene");
     }
@@ -60,13 +79,28 @@ pub fn run(scenes: &[PathBuf], counts: &[usize], rays: &[u32], errors: &[f64], r
         let dense = |count: usize, method: Method, rays_per_pair: u32| SolveRequest {
             patches: PatchTarget::Count(count),
             form_factors: FormFactorSettings { rays_per_pair },
-            solver: SolverSettings { method, ..SolverSettings::default() },
+            solver: SolverSettings {
+                method,
+                ..SolverSettings::default()
+            },
             ..SolveRequest::default()
         };
         // Mesh size and ray count decide the error; the method only the solve time.
-        let mut configurations: Vec<SolveRequest> = counts.iter().flat_map(|&n| rays.iter().map(move |&r| dense(n, Method::Gmres, r))).collect();
-        configurations.extend([Method::Jacobi, Method::GaussSeidel, Method::Progressive].map(|m| dense(middle, m, FormFactorSettings::default().rays_per_pair)));
-        configurations.extend(errors.iter().map(|&error| SolveRequest { hierarchy: Some(HierarchySettings { error, ..HierarchySettings::default() }), ..SolveRequest::default() }));
+        let mut configurations: Vec<SolveRequest> = counts
+            .iter()
+            .flat_map(|&n| rays.iter().map(move |&r| dense(n, Method::Gmres, r)))
+            .collect();
+        configurations.extend(
+            [Method::Jacobi, Method::GaussSeidel, Method::Progressive]
+                .map(|m| dense(middle, m, FormFactorSettings::default().rays_per_pair)),
+        );
+        configurations.extend(errors.iter().map(|&error| SolveRequest {
+            hierarchy: Some(HierarchySettings {
+                error,
+                ..HierarchySettings::default()
+            }),
+            ..SolveRequest::default()
+        }));
         for request in configurations {
             let mut runs = Vec::new();
             let mut peak_bytes = 0;
@@ -75,15 +109,34 @@ pub fn run(scenes: &[PathBuf], counts: &[usize], rays: &[u32], errors: &[f64], r
                 runs.push(solve_scene(scene.clone(), &request, &solver::no_progress)?);
                 peak_bytes = peak_bytes.max(crate::HEAP.peak_usage());
             }
-            let stage = |f: fn(&solver::SolveReport) -> f64| median(runs.iter().map(|r| f(&r.report)).collect());
-            let (mesh, ff, solve) = (stage(|r| r.seconds.mesh), stage(|r| r.seconds.form_factors), stage(|r| r.seconds.solve));
+            let stage = |f: fn(&solver::SolveReport) -> f64| {
+                median(runs.iter().map(|r| f(&r.report)).collect())
+            };
+            let (mesh, ff, solve) = (
+                stage(|r| r.seconds.mesh),
+                stage(|r| r.seconds.form_factors),
+                stage(|r| r.seconds.solve),
+            );
             let last = runs.last().context("one run")?;
             let error = evaluate(&last.scene, &last.mesh, &last.radiosity, &reference.probes);
             let (method, links) = match (&request.hierarchy, &last.report.hierarchy) {
-                (Some(settings), Some(stats)) => (format!("hierarchical E={}", settings.error), stats.links as u64),
-                _ => (request.solver.method.to_string(), (last.report.patches as u64).pow(2)),
+                (Some(settings), Some(stats)) => (
+                    format!("hierarchical E={}", settings.error),
+                    stats.links as u64,
+                ),
+                _ => (
+                    request.solver.method.to_string(),
+                    (last.report.patches as u64).pow(2),
+                ),
             };
-            eprintln!("{}: {} patches, {method}, {} rays: {:.3} s, smooth RMS {:.4}", scene_path.display(), last.report.patches, request.form_factors.rays_per_pair, load + mesh + ff + solve, error.smooth.rms);
+            eprintln!(
+                "{}: {} patches, {method}, {} rays: {:.3} s, smooth RMS {:.4}",
+                scene_path.display(),
+                last.report.patches,
+                request.form_factors.rays_per_pair,
+                load + mesh + ff + solve,
+                error.smooth.rms
+            );
             rows.push(Row {
                 scene: scene_path.display().to_string(),
                 patches: last.report.patches,
@@ -103,15 +156,18 @@ pub fn run(scenes: &[PathBuf], counts: &[usize], rays: &[u32], errors: &[f64], r
             o.scene == rows[i].scene
                 && o.seconds[3] <= rows[i].seconds[3]
                 && o.error.smooth.rms <= rows[i].error.smooth.rms
-                && (o.seconds[3] < rows[i].seconds[3] || o.error.smooth.rms < rows[i].error.smooth.rms)
+                && (o.seconds[3] < rows[i].seconds[3]
+                    || o.error.smooth.rms < rows[i].error.smooth.rms)
         });
         rows[i].pareto = !dominated;
     }
-    std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("{}: cannot create", out_dir.display()))?;
     let table = markdown(&rows, command, scenes, name)?;
     print!("{table}");
     let table_path = out_dir.join(format!("{name}.md"));
-    std::fs::write(&table_path, &table).with_context(|| format!("{}: cannot write", table_path.display()))?;
+    std::fs::write(&table_path, &table)
+        .with_context(|| format!("{}: cannot write", table_path.display()))?;
     plot(&rows, &out_dir.join(format!("{name}.svg")))?;
     Ok(())
 }
@@ -119,42 +175,113 @@ pub fn run(scenes: &[PathBuf], counts: &[usize], rays: &[u32], errors: &[f64], r
 fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf], name: &str) -> anyhow::Result<String> {
     let mut out = String::new();
     writeln!(out, "# Speed against error\n")?;
-    writeln!(out, "Made by `{command}` on this project's 2-core machine (timings: medians; errors are deterministic).")?;
-    writeln!(out, "Plot: [{name}.svg]({name}.svg). Error is measured at the reference's probes on")?;
-    writeln!(out, "non-emitting surfaces: *smooth* is what viewers show (corner-interpolated), *flat* the patch value;")?;
-    writeln!(out, "RMS relative to the reference's RMS, max relative to the reference's RMS probe value, energy =")?;
-    writeln!(out, "Σ B / Σ B_ref − 1. ★ marks the Pareto front (nothing else is both faster and more accurate).\n")?;
+    writeln!(
+        out,
+        "Made by `{command}` on this project's 2-core machine (timings: medians; errors are deterministic)."
+    )?;
+    writeln!(
+        out,
+        "Plot: [{name}.svg]({name}.svg). Error is measured at the reference's probes on"
+    )?;
+    writeln!(
+        out,
+        "non-emitting surfaces: *smooth* is what viewers show (corner-interpolated), *flat* the patch value;"
+    )?;
+    writeln!(
+        out,
+        "RMS relative to the reference's RMS, max relative to the reference's RMS probe value, energy ="
+    )?;
+    writeln!(
+        out,
+        "Σ B / Σ B_ref − 1. ★ marks the Pareto front (nothing else is both faster and more accurate).\n"
+    )?;
     for scene in scenes {
         let reference = load_reference(scene)?;
-        let noise = rows.iter().find(|r| r.scene == scene.display().to_string()).map_or(0.0, |r| r.error.reference_noise);
-        writeln!(out, "Reference for `{}`: {} probes × {} paths (`{}`), relative noise {:.4}.\n", scene.display(), reference.probes.len(), reference.samples, reference.command, noise)?;
+        let noise = rows
+            .iter()
+            .find(|r| r.scene == scene.display().to_string())
+            .map_or(0.0, |r| r.error.reference_noise);
+        writeln!(
+            out,
+            "Reference for `{}`: {} probes × {} paths (`{}`), relative noise {:.4}.\n",
+            scene.display(),
+            reference.probes.len(),
+            reference.samples,
+            reference.command,
+            noise
+        )?;
     }
-    writeln!(out, "*links* are the dense matrix's n² entries or the hierarchy's links; *peak MB* is the largest heap in use during the run.\n")?;
-    writeln!(out, "| scene | patches | method | rays | links | links/patch | peak MB | load+mesh s | form factors s | solve s | total s | smooth RMS | flat RMS | max | energy | front |")?;
-    writeln!(out, "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:-:|")?;
+    writeln!(
+        out,
+        "*links* are the dense matrix's n² entries or the hierarchy's links; *peak MB* is the largest heap in use during the run.\n"
+    )?;
+    writeln!(
+        out,
+        "| scene | patches | method | rays | links | links/patch | peak MB | load+mesh s | form factors s | solve s | total s | smooth RMS | flat RMS | max | energy | front |"
+    )?;
+    writeln!(
+        out,
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:-:|"
+    )?;
     for r in rows {
         writeln!(
             out,
             "| {} | {} | {} | {} | {} | {:.1} | {:.0} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.3} | {:+.4} | {} |",
-            r.scene, r.patches, r.method, r.rays, r.links, r.links as f64 / r.patches.max(1) as f64, r.peak_bytes as f64 / 1e6,
-            r.seconds[0], r.seconds[1], r.seconds[2], r.seconds[3],
-            r.error.smooth.rms, r.error.flat.rms, r.error.smooth.max, r.error.smooth.energy,
+            r.scene,
+            r.patches,
+            r.method,
+            r.rays,
+            r.links,
+            r.links as f64 / r.patches.max(1) as f64,
+            r.peak_bytes as f64 / 1e6,
+            r.seconds[0],
+            r.seconds[1],
+            r.seconds[2],
+            r.seconds[3],
+            r.error.smooth.rms,
+            r.error.flat.rms,
+            r.error.smooth.max,
+            r.error.smooth.energy,
             if r.pareto { "★" } else { "" }
         )?;
     }
     writeln!(out, "\n## Hierarchical against dense at equal error\n")?;
-    writeln!(out, "Dense GMRES seconds at the hierarchical row's smooth RMS, interpolated log-log between the two dense rows (2 rays per pair) that bracket it; beyond the dense rows, extrapolated from the last two (marked ~).\n")?;
-    writeln!(out, "| scene | hierarchical | leaves | seconds | smooth RMS | dense seconds at that RMS | dense patches at that RMS | speed-up |")?;
+    writeln!(
+        out,
+        "Dense GMRES seconds at the hierarchical row's smooth RMS, interpolated log-log between the two dense rows (2 rays per pair) that bracket it; beyond the dense rows, extrapolated from the last two (marked ~).\n"
+    )?;
+    writeln!(
+        out,
+        "| scene | hierarchical | leaves | seconds | smooth RMS | dense seconds at that RMS | dense patches at that RMS | speed-up |"
+    )?;
     writeln!(out, "|---|---|---:|---:|---:|---:|---:|---:|")?;
     for h in rows.iter().filter(|r| r.method.starts_with("hierarchical")) {
-        let mut dense: Vec<&Row> = rows.iter().filter(|r| r.scene == h.scene && r.method == "gmres" && r.rays == FormFactorSettings::default().rays_per_pair).collect();
+        let mut dense: Vec<&Row> = rows
+            .iter()
+            .filter(|r| {
+                r.scene == h.scene
+                    && r.method == "gmres"
+                    && r.rays == FormFactorSettings::default().rays_per_pair
+            })
+            .collect();
         dense.sort_by_key(|r| r.patches);
-        let Some(((seconds, patches), extrapolated)) = dense_at(&dense, h.error.smooth.rms) else { continue };
+        let Some(((seconds, patches), extrapolated)) = dense_at(&dense, h.error.smooth.rms) else {
+            continue;
+        };
         writeln!(
             out,
             "| {} | {} | {} | {:.3} | {:.4} | {}{:.2} | {}{:.0} | {}{:.1}× |",
-            h.scene, h.method, h.patches, h.seconds[3], h.error.smooth.rms, if extrapolated { "~" } else { "" }, seconds, if extrapolated { "~" } else { "" }, patches,
-            if extrapolated { "~" } else { "" }, seconds / h.seconds[3]
+            h.scene,
+            h.method,
+            h.patches,
+            h.seconds[3],
+            h.error.smooth.rms,
+            if extrapolated { "~" } else { "" },
+            seconds,
+            if extrapolated { "~" } else { "" },
+            patches,
+            if extrapolated { "~" } else { "" },
+            seconds / h.seconds[3]
         )?;
     }
     Ok(out)
@@ -167,7 +294,9 @@ fn dense_at(dense: &[&Row], target: f64) -> Option<((f64, f64), bool)> {
     if dense.len() < 2 {
         return None;
     }
-    let pair = dense.windows(2).find(|w| w[0].error.smooth.rms >= target && target >= w[1].error.smooth.rms);
+    let pair = dense
+        .windows(2)
+        .find(|w| w[0].error.smooth.rms >= target && target >= w[1].error.smooth.rms);
     let (a, b, extrapolated) = match pair {
         Some(w) => (w[0], w[1], false),
         None => (dense[dense.len() - 2], dense[dense.len() - 1], true),
@@ -178,21 +307,39 @@ fn dense_at(dense: &[&Row], target: f64) -> Option<((f64, f64), bool)> {
     }
     let t = (target.ln() - ea) / (eb - ea);
     let at = |x: f64, y: f64| (x.ln() + t * (y.ln() - x.ln())).exp();
-    Some(((at(a.seconds[3], b.seconds[3]), at(a.patches as f64, b.patches as f64)), extrapolated))
+    Some((
+        (
+            at(a.seconds[3], b.seconds[3]),
+            at(a.patches as f64, b.patches as f64),
+        ),
+        extrapolated,
+    ))
 }
 
 fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
-    let bounds = |f: fn(&Row) -> f64| rows.iter().map(f).fold((f64::INFINITY, 0.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let bounds = |f: fn(&Row) -> f64| {
+        rows.iter()
+            .map(f)
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            })
+    };
     let (t_lo, t_hi) = bounds(|r| r.seconds[3]);
     let (e_lo, e_hi) = bounds(|r| r.error.smooth.rms.max(1e-6));
     let root = SVGBackend::new(path, (960, 640)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
-        .caption("radcast: total seconds vs smooth RMS error (log-log)", ("sans-serif", 22))
+        .caption(
+            "radcast: total seconds vs smooth RMS error (log-log)",
+            ("sans-serif", 22),
+        )
         .margin(20)
         .x_label_area_size(45)
         .y_label_area_size(70)
-        .build_cartesian_2d((t_lo * 0.7..t_hi * 1.4).log_scale(), (e_lo * 0.7..e_hi * 1.4).log_scale())?;
+        .build_cartesian_2d(
+            (t_lo * 0.7..t_hi * 1.4).log_scale(),
+            (e_lo * 0.7..e_hi * 1.4).log_scale(),
+        )?;
     chart
         .configure_mesh()
         .x_desc("total seconds (load + mesh + form factors + solve)")
@@ -202,7 +349,13 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
         .draw()?;
     let colours = [RED, BLUE, GREEN, MAGENTA, CYAN, BLACK];
     // Hierarchical rows form one group whatever their knob.
-    let group = |r: &Row| if r.method.starts_with("hierarchical") { ("hierarchical".to_string(), 0) } else { (r.method.clone(), r.rays) };
+    let group = |r: &Row| {
+        if r.method.starts_with("hierarchical") {
+            ("hierarchical".to_string(), 0)
+        } else {
+            (r.method.clone(), r.rays)
+        }
+    };
     let mut groups: Vec<(String, u32)> = rows.iter().map(group).collect();
     groups.sort();
     groups.dedup();
@@ -214,7 +367,12 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
         let in_group = |r: &&Row| group(r) == (method.clone(), *rays);
         // Circles for the first scene, triangles for the second, squares after.
         for (s, scene) in scenes.iter().enumerate() {
-            let points: Vec<(f64, f64)> = rows.iter().filter(in_group).filter(|r| r.scene == *scene).map(point).collect();
+            let points: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(in_group)
+                .filter(|r| r.scene == *scene)
+                .map(point)
+                .collect();
             let style = colour.filled();
             match s {
                 0 => chart.draw_series(points.iter().map(|p| Circle::new(*p, 5, style)))?,
@@ -222,16 +380,41 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
                 _ => chart.draw_series(points.iter().map(|p| Rectangle::new([*p, *p], style)))?,
             };
         }
-        let label = if *rays == 0 { format!("{method} (E sweep)") } else { format!("{method}, {rays} rays/pair") };
-        chart.draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?.label(label).legend(move |(x, y)| Circle::new((x, y), 5, colour.filled()));
+        let label = if *rays == 0 {
+            format!("{method} (E sweep)")
+        } else {
+            format!("{method}, {rays} rays/pair")
+        };
+        chart
+            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
+            .label(label)
+            .legend(move |(x, y)| Circle::new((x, y), 5, colour.filled()));
     }
     for (s, scene) in scenes.iter().enumerate() {
-        let mut front: Vec<(f64, f64)> = rows.iter().filter(|r| r.pareto && r.scene == *scene).map(point).collect();
+        let mut front: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.pareto && r.scene == *scene)
+            .map(point)
+            .collect();
         front.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let marker = if s == 0 { "circles" } else if s == 1 { "triangles" } else { "squares" };
-        chart.draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?.label(format!("Pareto front, {scene} ({marker})")).legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], BLACK));
+        let marker = if s == 0 {
+            "circles"
+        } else if s == 1 {
+            "triangles"
+        } else {
+            "squares"
+        };
+        chart
+            .draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?
+            .label(format!("Pareto front, {scene} ({marker})"))
+            .legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], BLACK));
     }
-    chart.configure_series_labels().position(SeriesLabelPosition::LowerLeft).background_style(WHITE.mix(0.9)).border_style(BLACK).draw()?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerLeft)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .draw()?;
     root.present()?;
     Ok(())
 }

@@ -4,12 +4,15 @@ mod error_sweep;
 
 use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
-use solver::form_factors::MAX_RAYS_PER_PAIR;
+use solver::HierarchySettings;
 use solver::accuracy::evaluate;
+use solver::form_factors::MAX_RAYS_PER_PAIR;
 use solver::reference::{Reference, place_probes, trace_probes};
 use solver::visibility::Occluders;
-use solver::{FormFactorSettings, MethodChoice, PatchTarget, Progress, Scene, SolveReport, SolveRequest, SolverSettings, solve_file};
-use solver::HierarchySettings;
+use solver::{
+    FormFactorSettings, MethodChoice, PatchTarget, Progress, Scene, SolveReport, SolveRequest,
+    SolverSettings, solve_file,
+};
 use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
@@ -159,12 +162,22 @@ impl Settings {
             bail!("--omega must be in (0, 2), got {}", self.omega);
         }
         if self.rays == 0 || self.rays > MAX_RAYS_PER_PAIR {
-            bail!("--rays must be in 1..={MAX_RAYS_PER_PAIR}, got {}", self.rays);
+            bail!(
+                "--rays must be in 1..={MAX_RAYS_PER_PAIR}, got {}",
+                self.rays
+            );
         }
         let request = SolveRequest {
             patches,
-            form_factors: FormFactorSettings { rays_per_pair: self.rays },
-            solver: SolverSettings { tolerance: self.tolerance, max_iterations: self.max_iterations, relaxation: self.omega, ..SolverSettings::default() },
+            form_factors: FormFactorSettings {
+                rays_per_pair: self.rays,
+            },
+            solver: SolverSettings {
+                tolerance: self.tolerance,
+                max_iterations: self.max_iterations,
+                relaxation: self.omega,
+                ..SolverSettings::default()
+            },
             ..SolveRequest::default()
         };
         Ok(request.with_method(self.method, hierarchy))
@@ -180,23 +193,36 @@ struct ProgressPrinter {
 impl ProgressPrinter {
     fn new() -> Self {
         let now = Instant::now();
-        ProgressPrinter { start: now, last: Mutex::new(now) }
+        ProgressPrinter {
+            start: now,
+            last: Mutex::new(now),
+        }
     }
 
     fn report(&self, progress: Progress) {
         if let Progress::Estimate { .. } = progress {
             return;
         }
-        let Ok(mut last) = self.last.try_lock() else { return };
+        let Ok(mut last) = self.last.try_lock() else {
+            return;
+        };
         if last.elapsed() < Duration::from_secs(1) {
             return;
         }
         *last = Instant::now();
         let t = self.start.elapsed().as_secs_f64();
         match progress {
-            Progress::FormFactors { done, total } => eprintln!("[{t:6.1}s] form factors {:5.1}%", 100.0 * done as f64 / total as f64),
-            Progress::Solve { iteration, residual } => eprintln!("[{t:6.1}s] solve: iteration {iteration}, residual {residual:.3e}"),
-            Progress::Probes { done, total } => eprintln!("[{t:6.1}s] reference: {done} of {total} probes"),
+            Progress::FormFactors { done, total } => eprintln!(
+                "[{t:6.1}s] form factors {:5.1}%",
+                100.0 * done as f64 / total as f64
+            ),
+            Progress::Solve {
+                iteration,
+                residual,
+            } => eprintln!("[{t:6.1}s] solve: iteration {iteration}, residual {residual:.3e}"),
+            Progress::Probes { done, total } => {
+                eprintln!("[{t:6.1}s] reference: {done} of {total} probes")
+            }
             Progress::Estimate { .. } => {}
         }
     }
@@ -204,23 +230,44 @@ impl ProgressPrinter {
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
-        Command::Solve { scene, settings, error, max_leaves, json, reference } => {
-            let request = settings.request(HierarchySettings { error, max_leaves, ..HierarchySettings::default() })?;
+        Command::Solve {
+            scene,
+            settings,
+            error,
+            max_leaves,
+            json,
+            reference,
+        } => {
+            let request = settings.request(HierarchySettings {
+                error,
+                max_leaves,
+                ..HierarchySettings::default()
+            })?;
             let printer = ProgressPrinter::new();
             let reference = reference
                 .map(|path| -> anyhow::Result<Reference> {
-                    let text = std::fs::read_to_string(&path).with_context(|| format!("{}: cannot read", path.display()))?;
-                    serde_json::from_str(&text).with_context(|| format!("{}: not a radcast reference", path.display()))
+                    let text = std::fs::read_to_string(&path)
+                        .with_context(|| format!("{}: cannot read", path.display()))?;
+                    serde_json::from_str(&text)
+                        .with_context(|| format!("{}: not a radcast reference", path.display()))
                 })
                 .transpose()?;
             let solved = solve_file(&scene, &request, &|p| printer.report(p))?;
-            let measured = reference.map(|r| evaluate(&solved.scene, &solved.mesh, &solved.radiosity, &r.probes));
+            let measured = reference
+                .map(|r| evaluate(&solved.scene, &solved.mesh, &solved.radiosity, &r.probes));
             let report = &solved.report;
             if report.skipped_faces > 0 {
-                eprintln!("warning: {}: skipped {} zero-area faces", scene.display(), report.skipped_faces);
+                eprintln!(
+                    "warning: {}: skipped {} zero-area faces",
+                    scene.display(),
+                    report.skipped_faces
+                );
             }
             if let (Some(asked), Some(stats)) = (request.hierarchy, report.hierarchy) {
-                stats.budget_warnings(&asked).iter().for_each(|warning| eprintln!("warning: {warning}"));
+                stats
+                    .budget_warnings(&asked)
+                    .iter()
+                    .for_each(|warning| eprintln!("warning: {warning}"));
             }
             if !report.converged {
                 eprintln!(
@@ -240,49 +287,137 @@ fn main() -> anyhow::Result<()> {
                 if let Some(e) = measured {
                     println!(
                         "error       smooth RMS {:.4}, max {:.3}, energy {:+.4}; flat RMS {:.4}  ({} probes, reference noise {:.4})",
-                        e.smooth.rms, e.smooth.max, e.smooth.energy, e.flat.rms, e.probes, e.reference_noise
+                        e.smooth.rms,
+                        e.smooth.max,
+                        e.smooth.energy,
+                        e.flat.rms,
+                        e.probes,
+                        e.reference_noise
                     );
                 }
             }
         }
-        Command::Reference { scene: path, probes, samples, seed, out } => {
-            anyhow::ensure!(probes > 0 && samples > 1, "--probes must be at least 1 and --samples at least 2");
+        Command::Reference {
+            scene: path,
+            probes,
+            samples,
+            seed,
+            out,
+        } => {
+            anyhow::ensure!(
+                probes > 0 && samples > 1,
+                "--probes must be at least 1 and --samples at least 2"
+            );
             let scene = Scene::load_obj(&path)?;
             let occluders = Occluders::new(&scene);
             let printer = ProgressPrinter::new();
             let placed = place_probes(&scene, probes, seed);
-            let traced = trace_probes(&scene, &occluders, &placed, samples, seed, &|p| printer.report(p));
-            let command = format!("radcast reference {} --probes {probes} --samples {samples} --seed {seed} --out {}", path.display(), out.display());
-            let reference = Reference { command, seed, samples, probes: traced };
-            std::fs::write(&out, serde_json::to_string_pretty(&reference)?).with_context(|| format!("{}: cannot write", out.display()))?;
-            eprintln!("wrote {} ({} probes x {samples} paths)", out.display(), probes);
+            let traced = trace_probes(&scene, &occluders, &placed, samples, seed, &|p| {
+                printer.report(p)
+            });
+            let command = format!(
+                "radcast reference {} --probes {probes} --samples {samples} --seed {seed} --out {}",
+                path.display(),
+                out.display()
+            );
+            let reference = Reference {
+                command,
+                seed,
+                samples,
+                probes: traced,
+            };
+            std::fs::write(&out, serde_json::to_string_pretty(&reference)?)
+                .with_context(|| format!("{}: cannot write", out.display()))?;
+            eprintln!(
+                "wrote {} ({} probes x {samples} paths)",
+                out.display(),
+                probes
+            );
         }
         Command::Generate { pieces, seed, out } => {
             let mtl_path = out.with_extension("mtl");
-            let mtl_name = mtl_path.file_name().and_then(|n| n.to_str()).context("--out needs a file name")?;
+            let mtl_name = mtl_path
+                .file_name()
+                .and_then(|n| n.to_str())
+                .context("--out needs a file name")?;
             let scene = solver::generate::furnished_room(pieces, seed, mtl_name);
             if let Some(folder) = out.parent().filter(|f| !f.as_os_str().is_empty()) {
-                std::fs::create_dir_all(folder).with_context(|| format!("{}: cannot create", folder.display()))?;
+                std::fs::create_dir_all(folder)
+                    .with_context(|| format!("{}: cannot create", folder.display()))?;
             }
-            std::fs::write(&out, &scene.obj).with_context(|| format!("{}: cannot write", out.display()))?;
-            std::fs::write(&mtl_path, &scene.mtl).with_context(|| format!("{}: cannot write", mtl_path.display()))?;
+            std::fs::write(&out, &scene.obj)
+                .with_context(|| format!("{}: cannot write", out.display()))?;
+            std::fs::write(&mtl_path, &scene.mtl)
+                .with_context(|| format!("{}: cannot write", mtl_path.display()))?;
             let loaded = Scene::load_obj(&out)?;
-            eprintln!("wrote {} and {}: {} objects, {} faces ({} triangles)", out.display(), mtl_path.display(), loaded.objects.len(), loaded.faces.len(), loaded.triangle_count());
+            eprintln!(
+                "wrote {} and {}: {} objects, {} faces ({} triangles)",
+                out.display(),
+                mtl_path.display(),
+                loaded.objects.len(),
+                loaded.faces.len(),
+                loaded.triangle_count()
+            );
         }
-        Command::Bench { scenes, error: true, counts, repeat, sweep_rays, sweep_error, out_dir, name, .. } => {
+        Command::Bench {
+            scenes,
+            error: true,
+            counts,
+            repeat,
+            sweep_rays,
+            sweep_error,
+            out_dir,
+            name,
+            ..
+        } => {
             let list = |values: &[String]| values.join(",");
-            let named = if name == "speed-vs-error" { String::new() } else { format!(" --name {name}") };
+            let named = if name == "speed-vs-error" {
+                String::new()
+            } else {
+                format!(" --name {name}")
+            };
             let command = format!(
                 "radcast bench --error {} --counts {} --sweep-rays {} --sweep-error {} --repeat {repeat}{named}",
-                scenes.iter().map(|s| s.display().to_string()).collect::<Vec<_>>().join(" "),
+                scenes
+                    .iter()
+                    .map(|s| s.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(" "),
                 list(&counts.iter().map(ToString::to_string).collect::<Vec<_>>()),
-                list(&sweep_rays.iter().map(ToString::to_string).collect::<Vec<_>>()),
-                list(&sweep_error.iter().map(ToString::to_string).collect::<Vec<_>>())
+                list(
+                    &sweep_rays
+                        .iter()
+                        .map(ToString::to_string)
+                        .collect::<Vec<_>>()
+                ),
+                list(
+                    &sweep_error
+                        .iter()
+                        .map(ToString::to_string)
+                        .collect::<Vec<_>>()
+                )
             );
-            anyhow::ensure!(sweep_error.iter().all(|e| *e > 0.0 && *e < 1.0), "--sweep-error values must be in (0, 1)");
-            error_sweep::run(&scenes, &counts, &sweep_rays, &sweep_error, repeat.max(1), (&out_dir, &name), &command)?;
+            anyhow::ensure!(
+                sweep_error.iter().all(|e| *e > 0.0 && *e < 1.0),
+                "--sweep-error values must be in (0, 1)"
+            );
+            error_sweep::run(
+                &scenes,
+                &counts,
+                &sweep_rays,
+                &sweep_error,
+                repeat.max(1),
+                (&out_dir, &name),
+                &command,
+            )?;
         }
-        Command::Bench { scenes, counts, repeat, settings, .. } => {
+        Command::Bench {
+            scenes,
+            counts,
+            repeat,
+            settings,
+            ..
+        } => {
             for scene in &scenes {
                 bench(scene, &counts, repeat.max(1), &settings)?;
             }
@@ -293,24 +428,45 @@ fn main() -> anyhow::Result<()> {
 
 fn print_summary(scene: &std::path::Path, r: &SolveReport) {
     let s = &r.seconds;
-    println!("scene       {} ({} objects, {} triangles)", scene.display(), r.objects.len(), r.triangles);
+    println!(
+        "scene       {} ({} objects, {} triangles)",
+        scene.display(),
+        r.objects.len(),
+        r.triangles
+    );
     println!("patches     {}  ({} shadow rays)", r.patches, r.rays);
     if let Some(h) = &r.hierarchy {
         println!(
             "hierarchy   {} links ({:.1} per leaf), {} clusters, {} rounds, {} links decided by the shaft alone",
-            h.links, h.links as f64 / h.elements.max(1) as f64, h.clusters, h.rounds, h.shaft_decided
+            h.links,
+            h.links as f64 / h.elements.max(1) as f64,
+            h.clusters,
+            h.rounds,
+            h.shaft_decided
         );
     }
     println!("peak heap   {:.1} MB", HEAP.peak_usage() as f64 / 1e6);
-    println!("solver      {}: {} iterations, residual {:.2e}{}", r.method, r.iterations, r.residual, if r.converged { "" } else { " (NOT converged)" });
+    println!(
+        "solver      {}: {} iterations, residual {:.2e}{}",
+        r.method,
+        r.iterations,
+        r.residual,
+        if r.converged { "" } else { " (NOT converged)" }
+    );
     println!(
         "seconds     load {:.3}  mesh {:.3}  form factors {:.3}  solve {:.3}  total {:.3}",
         s.load, s.mesh, s.form_factors, s.solve, s.total
     );
-    println!("{:<16} {:>14}  mean radiosity W/m^2 (r, g, b)", "object", "area");
+    println!(
+        "{:<16} {:>14}  mean radiosity W/m^2 (r, g, b)",
+        "object", "area"
+    );
     for o in &r.objects {
         let [red, green, blue] = o.radiosity;
-        println!("{:<16} {:>14.6e}  {red:10.4} {green:10.4} {blue:10.4}", o.name, o.area);
+        println!(
+            "{:<16} {:>14.6e}  {red:10.4} {green:10.4} {blue:10.4}",
+            o.name, o.area
+        );
     }
 }
 
@@ -319,21 +475,40 @@ fn median(values: &mut [f64]) -> f64 {
     values[values.len() / 2]
 }
 
-fn bench(scene: &std::path::Path, counts: &[usize], repeat: usize, settings: &Settings) -> anyhow::Result<()> {
-    println!("`radcast bench {} --counts {} --repeat {repeat} --method {}` ({} threads), medians of {repeat} runs:\n",
+fn bench(
+    scene: &std::path::Path,
+    counts: &[usize],
+    repeat: usize,
+    settings: &Settings,
+) -> anyhow::Result<()> {
+    println!(
+        "`radcast bench {} --counts {} --repeat {repeat} --method {}` ({} threads), medians of {repeat} runs:\n",
         scene.display(),
-        counts.iter().map(ToString::to_string).collect::<Vec<_>>().join(","),
+        counts
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(","),
         settings.method,
-        rayon::current_num_threads());
-    println!("| patches | load s | mesh s | form factors s | solve s | total s | iterations | rays |");
+        rayon::current_num_threads()
+    );
+    println!(
+        "| patches | load s | mesh s | form factors s | solve s | total s | iterations | rays |"
+    );
     println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
     for &count in counts {
-        let request = Settings { patches: count, patch_size: None, ..settings.clone() }.request(HierarchySettings::default())?;
+        let request = Settings {
+            patches: count,
+            patch_size: None,
+            ..settings.clone()
+        }
+        .request(HierarchySettings::default())?;
         let mut runs = Vec::new();
         for _ in 0..repeat {
             runs.push(solve_file(scene, &request, &solver::no_progress)?.report);
         }
-        let stage = |f: fn(&SolveReport) -> f64| median(&mut runs.iter().map(f).collect::<Vec<_>>());
+        let stage =
+            |f: fn(&SolveReport) -> f64| median(&mut runs.iter().map(f).collect::<Vec<_>>());
         let (load, mesh, ff, solve, total) = (
             stage(|r| r.seconds.load),
             stage(|r| r.seconds.mesh),
@@ -342,7 +517,10 @@ fn bench(scene: &std::path::Path, counts: &[usize], repeat: usize, settings: &Se
             stage(|r| r.seconds.total),
         );
         let last = runs.last().context("at least one run")?;
-        println!("| {} | {load:.4} | {mesh:.4} | {ff:.4} | {solve:.4} | {total:.4} | {} | {} |", last.patches, last.iterations, last.rays);
+        println!(
+            "| {} | {load:.4} | {mesh:.4} | {ff:.4} | {solve:.4} | {total:.4} | {} | {} |",
+            last.patches, last.iterations, last.rays
+        );
     }
     Ok(())
 }
