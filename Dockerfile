@@ -2,7 +2,7 @@
 FROM rust:1-bookworm AS build
 WORKDIR /src
 COPY . .
-RUN cargo build --release --locked -p radcast-server -p radcast-client -p radcast-solver
+RUN cargo build --release --locked -p radcast-server -p radcast-client -p radcast-cli
 
 FROM debian:bookworm-slim
 RUN useradd --system --home /srv/radcast radcast \

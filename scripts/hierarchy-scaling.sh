@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 error=${1:-0.3}
 [ $# -gt 0 ] && shift
 pieces=${*:-"30 100 300 1000"}
-cargo build --quiet --release -p radcast-solver
+cargo build --quiet --release -p radcast-cli
 echo "| pieces | faces | leaves | links | links/leaf | seconds | peak MB |"
 echo "|---:|---:|---:|---:|---:|---:|---:|"
 for n in $pieces; do

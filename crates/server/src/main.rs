@@ -4,9 +4,7 @@ use anyhow::Context;
 use clap::Parser;
 use server::solving::{emitters, prepare, serve_edits, shared_for, solve_and_publish};
 use server::{Limits, routes};
-use solver::{
-    FormFactorSettings, HierarchySettings, MethodChoice, PatchTarget, SolveRequest, SolverSettings,
-};
+use solver::args::SolveArgs;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -20,22 +18,8 @@ struct Args {
     /// Address to listen on.
     #[arg(long, env = "RADCAST_ADDR", default_value = "127.0.0.1:8080")]
     addr: String,
-    /// Target number of patches (dense methods).
-    #[arg(long, env = "RADCAST_PATCHES", default_value_t = 1000)]
-    patches: usize,
-    /// Solver on a uniform mesh (jacobi, gauss-seidel, progressive, gmres), or hierarchical:
-    /// refinement decides the patches (--error sets how finely).
-    #[arg(long, env = "RADCAST_METHOD", default_value = "gmres")]
-    method: MethodChoice,
-    /// With --method hierarchical: the relative error a link may carry; smaller refines more.
-    #[arg(long, env = "RADCAST_ERROR", default_value_t = HierarchySettings::default().error)]
-    error: f64,
-    /// With --method hierarchical: leaves at most (bounds memory, about 2.3 KB a leaf).
-    #[arg(long, env = "RADCAST_MAX_LEAVES", default_value_t = HierarchySettings::default().max_leaves)]
-    max_leaves: usize,
-    /// Relative residual to stop at.
-    #[arg(long, env = "RADCAST_TOLERANCE", default_value_t = 1e-6)]
-    tolerance: f64,
+    #[command(flatten)]
+    solve: SolveArgs,
     /// Folder for cached solutions (keyed by scene content and settings).
     #[arg(long, env = "RADCAST_CACHE_DIR", default_value = "cache")]
     cache_dir: PathBuf,
@@ -88,35 +72,7 @@ async fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     // One descriptor per viewer: take the hard limit.
     let _ = rlimit::increase_nofile_limit(u64::MAX);
-    anyhow::ensure!(args.patches > 0, "--patches must be at least 1");
-    anyhow::ensure!(
-        args.tolerance > 0.0 && args.tolerance < 1.0,
-        "--tolerance must be in (0, 1), got {}",
-        args.tolerance
-    );
-    anyhow::ensure!(
-        args.error > 0.0 && args.error < 1.0,
-        "--error must be in (0, 1), got {}",
-        args.error
-    );
-    anyhow::ensure!(args.max_leaves > 0, "--max-leaves must be at least 1");
-    let request = SolveRequest {
-        patches: PatchTarget::Count(args.patches),
-        form_factors: FormFactorSettings::default(),
-        solver: SolverSettings {
-            tolerance: args.tolerance,
-            ..SolverSettings::default()
-        },
-        ..SolveRequest::default()
-    }
-    .with_method(
-        args.method,
-        HierarchySettings {
-            error: args.error,
-            max_leaves: args.max_leaves,
-            ..HierarchySettings::default()
-        },
-    );
+    let request = args.solve.request().map_err(anyhow::Error::msg)?;
     let limits = Limits {
         max_viewers: args.max_viewers,
         max_viewers_per_ip: args.max_viewers_per_ip,

@@ -236,9 +236,8 @@ pub fn solve_and_publish(
         seconds = s.total,
         "solved"
     );
-    if let (Some(asked), Some(stats)) = (prepared.request.hierarchy, report.hierarchy) {
-        stats
-            .budget_warnings(&asked)
+    if let (Some(asked), Some(stats)) = (&prepared.request.hierarchy, &report.hierarchy) {
+        solver::args::budget_warnings(asked, stats)
             .iter()
             .for_each(|warning| tracing::warn!("{warning}"));
     }

@@ -7,159 +7,22 @@
 //! where the integrand varies fastest; far pairs use the centroid.
 
 use crate::Progress;
-use crate::geometry::{bounds, cosine_direction, point_to_polygon_form_factor};
+use crate::geometry::bounds;
 use crate::mesh::{Mesh, Patch};
+use crate::pair::{
+    FormFactorSettings, mutually_facing, near_pair_level, rays_for_pair, unoccluded_form_factor,
+};
+use crate::sampling::{pair_seed, splitmix64, stratified_uv};
 use crate::scene::Rgb;
+use crate::transport::{Entries, Transport};
 use crate::visibility::Occluders;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
-/// How light moves between patches: what every solver needs from form factors. A dense matrix
-/// and a hierarchical link list ([`crate::hierarchy::Hierarchy`]) both implement it.
-pub trait Transport: Sync {
-    /// Number of patches (rows and columns).
-    fn patch_count(&self) -> usize;
-
-    /// `out_i = sum_j F_ij B_j` for every `i`: the irradiance each patch gathers from `radiosity`.
-    fn gather(&self, radiosity: &[Rgb], out: &mut [Rgb]);
-
-    /// Single rows and columns, for methods that update one patch at a time (Gauss-Seidel,
-    /// progressive); `None` where the operator exists only as a whole product.
-    fn entries(&self) -> Option<&dyn Entries> {
-        None
-    }
-}
-
-/// Single rows and columns of the form-factor matrix.
-pub trait Entries: Sync {
-    /// Irradiance gathered by patch `i` from `radiosity`: `sum_j F_ij B_j`.
-    fn gather_row(&self, i: usize, radiosity: &[Rgb]) -> Rgb;
-
-    /// Calls `visit(i, F_ij)` for every receiver `i` with a non-zero factor from source `j`.
-    fn for_each_in_column(&self, j: usize, visit: &mut dyn FnMut(usize, f64));
-}
-
-/// Accuracy knobs of the form-factor computation.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FormFactorSettings {
-    /// Shadow rays between a far pair of patches; near pairs get this many per receiver
-    /// quadrature cell (at most [`MAX_RAYS_PER_PAIR`]).
-    pub rays_per_pair: u32,
-}
-
-impl Default for FormFactorSettings {
-    fn default() -> Self {
-        FormFactorSettings { rays_per_pair: 2 }
-    }
-}
-
-/// Upper bound on the shadow rays one pair of patches gets.
-pub const MAX_RAYS_PER_PAIR: u32 = 64;
-
-/// Sources farther than this many receiver radii are integrated at the receiver's centroid;
-/// that rule's relative error falls like (radius / distance)^2 (about 0.5% at 8 radii).
-const NEAR_FIELD_RADII: f64 = 8.0;
-/// Cells of a near-pair quadrature are about `1 / QUADRATURE_DENSITY` of the gap they look across.
-const QUADRATURE_DENSITY: f64 = 1.5;
-/// The finest rule for one pair (`4 * 6^2` points on a quad), reached by touching patches.
-const MAX_PAIR_LEVEL: u32 = 6;
-
-/// The quadrature level (see [`Polygon::for_each_quadrature_point`]) receiver `p` needs for
-/// source `q`: `None` in the far field (the centroid serves), else finer the smaller the gap
-/// between `p`'s centroid and the nearest the source can come (zero for touching patches).
-///
-/// [`Polygon::for_each_quadrature_point`]: crate::geometry::Polygon::for_each_quadrature_point
-pub(crate) fn near_pair_level(p: &Patch, q: &Patch) -> Option<u32> {
-    let distance = p.centroid.distance(q.centroid);
-    if distance >= NEAR_FIELD_RADII * p.radius {
-        return None;
-    }
-    let gap = distance - q.radius;
-    let level = if gap <= 0.0 {
-        MAX_PAIR_LEVEL
-    } else {
-        ((QUADRATURE_DENSITY * p.radius / gap).ceil() as u32).clamp(1, MAX_PAIR_LEVEL)
-    };
-    Some(level)
-}
-
-/// Rays a receiver casts over its hemisphere to decide whether its view is closed.
-const CLOSURE_RAYS: u32 = 64;
-
-/// Whether every one of [`CLOSURE_RAYS`] cosine-distributed rays from stratified points of the
-/// patch meets the front of some face: then all the light leaving it lands on a patch, and its
-/// row must sum to one however coarsely visibility was sampled. Rays that escape or meet a back
-/// face mean the view is open, and the row is left as computed.
-pub(crate) fn sees_closed_view(p: &Patch, index: usize, occluders: &Occluders) -> bool {
-    let seed = splitmix64(index as u64 ^ 0xC105_ED00);
-    (0..CLOSURE_RAYS).all(|k| {
-        let (u, v) = stratified_uv(k, seed);
-        let (s, t) = stratified_uv(k, splitmix64(seed));
-        occluders
-            .closest_hit(
-                p.polygon.point_at(u, v),
-                cosine_direction(p.normal, s, t),
-                p.face,
-            )
-            .is_some_and(|hit| hit.front)
-    })
-}
-
-/// Shadow rays between two patches: more for pairs that are near against their size, where
-/// visibility varies most across the pair. Symmetric in the pair.
-pub(crate) fn rays_for_pair(p: &Patch, q: &Patch, settings: &FormFactorSettings) -> u32 {
-    let distance = p.centroid.distance(q.centroid).max(f64::MIN_POSITIVE);
-    let closeness = ((2.0 * p.radius.max(q.radius) / distance).ceil() as u32).clamp(1, 4);
-    (settings.rays_per_pair.max(1) * closeness * closeness).min(MAX_RAYS_PER_PAIR)
-}
-
-/// True when each patch has part of itself strictly in front of the other: otherwise no light
-/// passes between them in either direction (surfaces are one-sided).
-pub(crate) fn mutually_facing(p: &Patch, q: &Patch) -> bool {
-    let tolerance = 1e-12 * (p.radius + q.radius);
-    let in_front = |of: &Patch, other: &Patch| {
-        other
-            .polygon
-            .corners()
-            .iter()
-            .any(|c| (*c - of.centroid).dot(of.normal) > tolerance)
-    };
-    in_front(p, q) && in_front(q, p)
-}
-
 /// Marks a pair that cannot exchange light at all in the clear-ray matrix (counts are at most
 /// [`MAX_RAYS_PER_PAIR`]).
 const NOT_FACING: u8 = u8::MAX;
-
-/// SplitMix64 (Steele, Lea, Flood 2014): a well-mixed hash of the pair, so the sample pattern
-/// is deterministic yet decorrelated between pairs.
-pub(crate) fn splitmix64(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
-}
-
-/// A seed for the sample pattern of the ordered pair `(a, b)`: the same every time, different
-/// between pairs.
-pub(crate) fn pair_seed(a: usize, b: usize) -> u64 {
-    splitmix64(((a as u64) << 32) | b as u64)
-}
-
-/// The k-th point of Roberts' R2 sequence, rotated by `offset` (Cranley-Patterson), kept off the
-/// patch border so that a ray never starts on a shared edge.
-pub(crate) fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
-    // Roberts 2018, "The Unreasonable Effectiveness of Quasirandom Sequences": 1/phi_2, 1/phi_2^2.
-    const A1: f64 = 0.754_877_666_246_692_7;
-    const A2: f64 = 0.569_840_290_998_053_2;
-    let (u0, v0) = (
-        (offset >> 11) as f64 / (1u64 << 53) as f64,
-        (offset & 0xFFFF_FFFF) as f64 / 4_294_967_296.0,
-    );
-    let inset = |x: f64| 1e-3 + (1.0 - 2e-3) * x.fract();
-    (inset(u0 + k as f64 * A1), inset(v0 + k as f64 * A2))
-}
 
 /// The `rays` shadow segments between `p` and `q`: stratified points on both, decorrelated per
 /// pair, the same every time for the same pair.
@@ -179,13 +42,7 @@ fn pair_segments<'a>(
 }
 
 /// How many of `rays` segments between `p` and `q` nothing blocks.
-pub(crate) fn clear_rays(
-    p: &Patch,
-    q: &Patch,
-    pair: (usize, usize),
-    rays: u32,
-    occluders: &Occluders,
-) -> u32 {
+fn clear_rays(p: &Patch, q: &Patch, pair: (usize, usize), rays: u32, occluders: &Occluders) -> u32 {
     pair_segments(p, q, pair, rays)
         .filter(|(a, b)| occluders.segment_is_clear(*a, *b, [p.face, q.face]))
         .count() as u32
@@ -213,16 +70,6 @@ fn segment_meets_box(a: DVec3, b: DVec3, (lo, hi): (DVec3, DVec3)) -> bool {
         }
     }
     true
-}
-
-/// Unoccluded form factor from receiver `p` to source `q`: the area average over `p` of the
-/// analytic point-to-polygon factor, with the receiver's quadrature `level`.
-pub(crate) fn unoccluded_form_factor(p: &Patch, q: &Patch, level: u32) -> f64 {
-    let mut sum = 0.0;
-    p.polygon.for_each_quadrature_point(level, |x, weight| {
-        sum += weight * point_to_polygon_form_factor(x, p.normal, &q.polygon, q.normal)
-    });
-    sum
 }
 
 /// Copies each `m[j][i]` (j < i) to `m[i][j]` in cache-sized blocks.
@@ -315,7 +162,7 @@ fn normalise_row(
         *value = r as f32;
         sum += r;
     }
-    let scale = if sum > 0.0 && sees_closed_view(&patches[i], i, occluders) {
+    let scale = if sum > 0.0 && occluders.sees_closed_view(&patches[i], i) {
         1.0 / sum
     } else {
         1.0
@@ -512,7 +359,7 @@ impl DenseFormFactors {
                         .iter()
                         .map(|(j, raw)| raw - row[*j] as f64 / *scale)
                         .sum::<f64>();
-                let new_scale = if raw_sum > 0.0 && sees_closed_view(&patches[i], i, occluders) {
+                let new_scale = if raw_sum > 0.0 && occluders.sees_closed_view(&patches[i], i) {
                     1.0 / raw_sum
                 } else {
                     1.0

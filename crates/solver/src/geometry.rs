@@ -226,17 +226,6 @@ pub fn bounds(points: impl IntoIterator<Item = DVec3>) -> (DVec3, DVec3) {
     )
 }
 
-/// A unit direction about the unit `normal` with density `cos / pi`, from two uniform numbers
-/// in [0, 1) (Malley's method: uniform on the disc, lifted to the hemisphere; pbrt 4e, 13.6).
-pub fn cosine_direction(normal: DVec3, u: f64, v: f64) -> DVec3 {
-    let (radius, angle) = (u.sqrt(), 2.0 * PI * v);
-    let (tangent, bitangent) = normal.any_orthonormal_pair();
-    (tangent * (radius * angle.cos())
-        + bitangent * (radius * angle.sin())
-        + normal * (1.0 - u).max(0.0).sqrt())
-    .normalize()
-}
-
 /// Area of the triangle `a, b, c`.
 pub fn triangle_area(a: DVec3, b: DVec3, c: DVec3) -> f64 {
     0.5 * (b - a).cross(c - a).length()

@@ -4,26 +4,33 @@
 //! [`visibility`]) -> [`solve`]; [`pipeline`] runs it end to end with timings.
 
 pub mod accuracy;
+#[cfg(feature = "clap")]
+pub mod args;
 pub mod form_factors;
 pub mod generate;
 pub mod geometry;
 pub mod hierarchy;
 pub mod mesh;
+pub mod pair;
 pub mod pipeline;
 pub mod reference;
+pub mod sampling;
 pub mod scene;
 pub mod solve;
+pub mod transport;
 pub mod visibility;
 
-pub use form_factors::{DenseFormFactors, Entries, FormFactorSettings, Transport};
+pub use form_factors::DenseFormFactors;
 pub use hierarchy::{HierarchySettings, HierarchyStats};
 pub use mesh::{Mesh, Patch, PatchTarget};
+pub use pair::FormFactorSettings;
 pub use pipeline::{
     EditError, MethodChoice, MoveReport, Session, SolveError, SolveReport, SolveRequest, Solved,
     solve_file, solve_mesh, solve_scene,
 };
 pub use scene::{Material, Rgb, Scene, SceneError, View};
 pub use solve::{Method, SolveOutcome, SolverSettings, System, solve};
+pub use transport::{Entries, Transport};
 
 /// Where a long computation is, for progress displays and progressive streaming.
 #[derive(Clone, Copy, Debug, PartialEq)]

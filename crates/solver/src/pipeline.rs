@@ -1,11 +1,13 @@
 //! The whole offline path, scene file to solution, with a timing per stage: what the `radcast`
 //! command and the server both run.
 
-use crate::form_factors::{DenseFormFactors, FormFactorSettings, Transport};
-use crate::hierarchy::{Hierarchy, HierarchySettings, HierarchyStats};
+use crate::form_factors::DenseFormFactors;
+use crate::hierarchy::{Hierarchy, HierarchySettings, HierarchyStats, Refined};
 use crate::mesh::{Mesh, PatchTarget};
+use crate::pair::FormFactorSettings;
 use crate::scene::{Rgb, Scene, SceneError};
 use crate::solve::{NeedsEntries, SolveOutcome, SolverSettings, System, solve};
+use crate::transport::Transport;
 use crate::visibility::Occluders;
 use crate::{Progress, no_progress};
 use glam::DVec3;
@@ -363,7 +365,10 @@ impl Session {
         let occluders = Occluders::new(scene);
         seconds.mesh = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let (hierarchy, radiosity) = Hierarchy::build(
+        let Refined {
+            hierarchy,
+            radiosity,
+        } = Hierarchy::build(
             scene,
             &occluders,
             &settings,

@@ -7,7 +7,7 @@
 //! (seed, probe index), so the result is the same for any thread count.
 
 use crate::Progress;
-use crate::geometry::cosine_direction;
+use crate::sampling::cosine_direction;
 use crate::scene::{Rgb, Scene};
 use crate::visibility::Occluders;
 use glam::DVec3;

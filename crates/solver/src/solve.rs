@@ -6,8 +6,8 @@
 //! `|B - B*| <= |r| / (1 - max rho)`, which is why bright scenes need a small tolerance.
 
 use crate::Progress;
-use crate::form_factors::{Entries, Transport};
 use crate::scene::Rgb;
+use crate::transport::{Entries, Transport};
 use rayon::prelude::*;
 use std::fmt;
 use std::str::FromStr;

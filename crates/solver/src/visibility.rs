@@ -4,6 +4,8 @@
 //! chosen by measurement (docs/BENCHMARKS.md). Coordinates are re-centred on the scene before
 //! the conversion to f32, so a scene far from the origin keeps its precision.
 
+use crate::mesh::Patch;
+use crate::sampling::{cosine_direction, splitmix64, stratified_uv};
 use crate::scene::Scene;
 use glam::{DVec3, Vec3A};
 use obvhs::bvh2::{Bvh2, builder::build_bvh2};
@@ -48,8 +50,8 @@ impl OccluderFace {
     }
 }
 
-/// How segments find the faces they cross. Kept selectable so `examples/ray_backends.rs` can
-/// measure them against each other on the same intersection code (docs/BENCHMARKS.md).
+/// How segments find the faces they cross. Kept selectable so the backends can be tested and
+/// measured against each other on the same intersection code (docs/BENCHMARKS.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RayBackend {
     /// obvhs's compressed 8-wide BVH (the default: fastest measured).
@@ -96,6 +98,9 @@ fn ray_direction(direction: DVec3) -> Vec3A {
 /// Segments are shortened by this fraction of their length at each end, so that a point on a
 /// surface never shadows itself; relative, so scale does not matter.
 const SEGMENT_END_MARGIN: f32 = 1e-5;
+
+/// Rays a receiver casts over its hemisphere to decide whether its view is closed.
+const CLOSURE_RAYS: u32 = 64;
 
 impl Occluders {
     /// Builds the default index over every face of `scene`.
@@ -194,6 +199,24 @@ impl Occluders {
             face: best_face,
             distance: best_t as f64,
             front: self.faces[best_face as usize].normal.dot(ray.direction) < 0.0,
+        })
+    }
+
+    /// Whether every one of [`CLOSURE_RAYS`] cosine-distributed rays from stratified points of the
+    /// patch meets the front of some face: then all the light leaving it lands on a patch, and its
+    /// row must sum to one however coarsely visibility was sampled. Rays that escape or meet a back
+    /// face mean the view is open, and the row is left as computed.
+    pub fn sees_closed_view(&self, p: &Patch, index: usize) -> bool {
+        let seed = splitmix64(index as u64 ^ 0xC105_ED00);
+        (0..CLOSURE_RAYS).all(|k| {
+            let (u, v) = stratified_uv(k, seed);
+            let (s, t) = stratified_uv(k, splitmix64(seed));
+            self.closest_hit(
+                p.polygon.point_at(u, v),
+                cosine_direction(p.normal, s, t),
+                p.face,
+            )
+            .is_some_and(|hit| hit.front)
         })
     }
 

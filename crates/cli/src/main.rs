@@ -2,17 +2,14 @@
 
 mod error_sweep;
 
-use anyhow::{Context, bail};
-use clap::{Args, Parser, Subcommand};
+use anyhow::Context;
+use clap::{Parser, Subcommand};
 use solver::HierarchySettings;
 use solver::accuracy::evaluate;
-use solver::form_factors::MAX_RAYS_PER_PAIR;
+use solver::args::{SolveArgs, SolverArgs, budget_warnings};
 use solver::reference::{Reference, place_probes, trace_probes};
 use solver::visibility::Occluders;
-use solver::{
-    FormFactorSettings, MethodChoice, PatchTarget, Progress, Scene, SolveReport, SolveRequest,
-    SolverSettings, solve_file,
-};
+use solver::{Progress, Scene, SolveReport, solve_file};
 use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
@@ -36,14 +33,7 @@ enum Command {
         /// The OBJ file.
         scene: PathBuf,
         #[command(flatten)]
-        settings: Settings,
-        /// With --method hierarchical: the relative error a link may carry; smaller refines more.
-        #[arg(long, default_value_t = HierarchySettings::default().error)]
-        error: f64,
-        /// With --method hierarchical: leaves at most (bounds memory, about 2.3 KB a leaf); the
-        /// JSON says `leaf_budget_reached` when refinement stopped there.
-        #[arg(long, default_value_t = HierarchySettings::default().max_leaves)]
-        max_leaves: usize,
+        settings: SolveArgs,
         /// Print one JSON object on stdout instead of the table.
         #[arg(long)]
         json: bool,
@@ -110,78 +100,8 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         repeat: usize,
         #[command(flatten)]
-        settings: Settings,
+        settings: SolverArgs,
     },
-}
-
-#[derive(Args, Clone)]
-struct Settings {
-    /// Target number of patches.
-    #[arg(long, default_value_t = 1000, conflicts_with = "patch_size")]
-    patches: usize,
-    /// Target patch edge length in scene units (instead of --patches).
-    #[arg(long)]
-    patch_size: Option<f64>,
-    /// Solver on a uniform mesh with a dense matrix (jacobi, gauss-seidel, progressive, gmres),
-    /// or hierarchical: adaptive elements and links, solved with GMRES (--error sets accuracy).
-    #[arg(long, default_value = "gmres")]
-    method: MethodChoice,
-    /// Stop when the relative residual is at most this.
-    #[arg(long, default_value_t = 1e-6)]
-    tolerance: f64,
-    /// Give up after this many iterations.
-    #[arg(long, default_value_t = 100_000)]
-    max_iterations: usize,
-    /// SOR relaxation factor for gauss-seidel, in (0, 2).
-    #[arg(long, default_value_t = 1.0)]
-    omega: f64,
-    /// Shadow rays per far patch pair (near pairs get more).
-    #[arg(long, default_value_t = FormFactorSettings::default().rays_per_pair)]
-    rays: u32,
-}
-
-impl Settings {
-    /// The request; `hierarchy` applies to the hierarchical method.
-    fn request(&self, hierarchy: HierarchySettings) -> anyhow::Result<SolveRequest> {
-        if !(hierarchy.error > 0.0 && hierarchy.error < 1.0) {
-            bail!("--error must be in (0, 1), got {}", hierarchy.error);
-        }
-        if hierarchy.max_leaves == 0 {
-            bail!("--max-leaves must be at least 1");
-        }
-        let patches = match self.patch_size {
-            Some(size) if size.is_finite() && size > 0.0 => PatchTarget::EdgeLength(size),
-            Some(size) => bail!("--patch-size must be a positive length, got {size}"),
-            None if self.patches == 0 => bail!("--patches must be at least 1"),
-            None => PatchTarget::Count(self.patches),
-        };
-        if !(self.tolerance > 0.0 && self.tolerance < 1.0) {
-            bail!("--tolerance must be in (0, 1), got {}", self.tolerance);
-        }
-        if !(self.omega > 0.0 && self.omega < 2.0) {
-            bail!("--omega must be in (0, 2), got {}", self.omega);
-        }
-        if self.rays == 0 || self.rays > MAX_RAYS_PER_PAIR {
-            bail!(
-                "--rays must be in 1..={MAX_RAYS_PER_PAIR}, got {}",
-                self.rays
-            );
-        }
-        let request = SolveRequest {
-            patches,
-            form_factors: FormFactorSettings {
-                rays_per_pair: self.rays,
-            },
-            solver: SolverSettings {
-                tolerance: self.tolerance,
-                max_iterations: self.max_iterations,
-                relaxation: self.omega,
-                ..SolverSettings::default()
-            },
-            ..SolveRequest::default()
-        };
-        Ok(request.with_method(self.method, hierarchy))
-    }
 }
 
 /// Prints a progress line to stderr at most once a second, after the first second.
@@ -233,16 +153,10 @@ fn main() -> anyhow::Result<()> {
         Command::Solve {
             scene,
             settings,
-            error,
-            max_leaves,
             json,
             reference,
         } => {
-            let request = settings.request(HierarchySettings {
-                error,
-                max_leaves,
-                ..HierarchySettings::default()
-            })?;
+            let request = settings.request().map_err(anyhow::Error::msg)?;
             let printer = ProgressPrinter::new();
             let reference = reference
                 .map(|path| -> anyhow::Result<Reference> {
@@ -263,9 +177,8 @@ fn main() -> anyhow::Result<()> {
                     report.skipped_faces
                 );
             }
-            if let (Some(asked), Some(stats)) = (request.hierarchy, report.hierarchy) {
-                stats
-                    .budget_warnings(&asked)
+            if let (Some(asked), Some(stats)) = (&request.hierarchy, &report.hierarchy) {
+                budget_warnings(asked, stats)
                     .iter()
                     .for_each(|warning| eprintln!("warning: {warning}"));
             }
@@ -479,7 +392,7 @@ fn bench(
     scene: &std::path::Path,
     counts: &[usize],
     repeat: usize,
-    settings: &Settings,
+    settings: &SolverArgs,
 ) -> anyhow::Result<()> {
     println!(
         "`radcast bench {} --counts {} --repeat {repeat} --method {}` ({} threads), medians of {repeat} runs:\n",
@@ -497,12 +410,13 @@ fn bench(
     );
     println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
     for &count in counts {
-        let request = Settings {
+        let request = SolverArgs {
             patches: count,
             patch_size: None,
             ..settings.clone()
         }
-        .request(HierarchySettings::default())?;
+        .request(HierarchySettings::default())
+        .map_err(anyhow::Error::msg)?;
         let mut runs = Vec::new();
         for _ in 0..repeat {
             runs.push(solve_file(scene, &request, &solver::no_progress)?.report);

@@ -1,0 +1,225 @@
+//! The solve settings as command-line flags, one definition for the `radcast` command and the
+//! server (with the `clap` feature): each flag also reads an environment variable, and
+//! [`SolveArgs::request`] checks every value once, naming the flag that is wrong.
+
+use crate::hierarchy::{HierarchySettings, HierarchyStats};
+use crate::mesh::PatchTarget;
+use crate::pair::{FormFactorSettings, MAX_RAYS_PER_PAIR};
+use crate::pipeline::{MethodChoice, SolveRequest};
+use crate::solve::SolverSettings;
+
+/// Everything that decides a solution besides the scene, as flags.
+#[derive(clap::Args, Clone, Debug)]
+pub struct SolveArgs {
+    /// Mesh, form factors and solver.
+    #[command(flatten)]
+    pub solver: SolverArgs,
+    /// The hierarchical method's knob and budget.
+    #[command(flatten)]
+    pub hierarchy: HierarchyArgs,
+}
+
+/// The mesh, form-factor and solver flags: all of [`SolveArgs`] but the hierarchy's.
+#[derive(clap::Args, Clone, Debug)]
+pub struct SolverArgs {
+    /// Target number of patches (dense methods).
+    #[arg(
+        long,
+        env = "RADCAST_PATCHES",
+        default_value_t = 1000,
+        conflicts_with = "patch_size"
+    )]
+    pub patches: usize,
+    /// Target patch edge length in scene units (instead of --patches).
+    #[arg(long, env = "RADCAST_PATCH_SIZE")]
+    pub patch_size: Option<f64>,
+    /// Solver on a uniform mesh with a dense matrix (jacobi, gauss-seidel, progressive, gmres),
+    /// or hierarchical: adaptive elements and links, solved with GMRES (--error sets accuracy).
+    #[arg(long, env = "RADCAST_METHOD", default_value = "gmres")]
+    pub method: MethodChoice,
+    /// Stop when the relative residual is at most this.
+    #[arg(long, env = "RADCAST_TOLERANCE", default_value_t = SolverSettings::default().tolerance)]
+    pub tolerance: f64,
+    /// Give up after this many iterations.
+    #[arg(long, env = "RADCAST_MAX_ITERATIONS", default_value_t = SolverSettings::default().max_iterations)]
+    pub max_iterations: usize,
+    /// SOR relaxation factor for gauss-seidel, in (0, 2).
+    #[arg(long, env = "RADCAST_OMEGA", default_value_t = SolverSettings::default().relaxation)]
+    pub omega: f64,
+    /// Shadow rays per far patch pair (near pairs get more).
+    #[arg(long, env = "RADCAST_RAYS", default_value_t = FormFactorSettings::default().rays_per_pair)]
+    pub rays: u32,
+}
+
+/// The hierarchical method's flags.
+#[derive(clap::Args, Clone, Debug)]
+pub struct HierarchyArgs {
+    /// With --method hierarchical: the relative error a link may carry; smaller refines more.
+    #[arg(long, env = "RADCAST_ERROR", default_value_t = HierarchySettings::default().error)]
+    pub error: f64,
+    /// With --method hierarchical: leaves at most (bounds memory, about 2.3 KB a leaf); the
+    /// JSON says `leaf_budget_reached` when refinement stopped there.
+    #[arg(long, env = "RADCAST_MAX_LEAVES", default_value_t = HierarchySettings::default().max_leaves)]
+    pub max_leaves: usize,
+}
+
+impl SolveArgs {
+    /// The request these flags ask for, or the first flag whose value is out of range.
+    pub fn request(&self) -> Result<SolveRequest, String> {
+        self.solver.request(self.hierarchy.settings()?)
+    }
+}
+
+impl HierarchyArgs {
+    /// The hierarchy's settings, or the first flag whose value is out of range.
+    pub fn settings(&self) -> Result<HierarchySettings, String> {
+        if !(self.error > 0.0 && self.error < 1.0) {
+            return Err(format!("--error must be in (0, 1), got {}", self.error));
+        }
+        if self.max_leaves == 0 {
+            return Err("--max-leaves must be at least 1".into());
+        }
+        Ok(HierarchySettings {
+            error: self.error,
+            max_leaves: self.max_leaves,
+            ..HierarchySettings::default()
+        })
+    }
+}
+
+impl SolverArgs {
+    /// The request these flags ask for, solved hierarchically with `hierarchy` if the method
+    /// says so; or the first flag whose value is out of range.
+    pub fn request(&self, hierarchy: HierarchySettings) -> Result<SolveRequest, String> {
+        let patches = match self.patch_size {
+            Some(size) if size.is_finite() && size > 0.0 => PatchTarget::EdgeLength(size),
+            Some(size) => {
+                return Err(format!(
+                    "--patch-size must be a positive length, got {size}"
+                ));
+            }
+            None if self.patches == 0 => return Err("--patches must be at least 1".into()),
+            None => PatchTarget::Count(self.patches),
+        };
+        if !(self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return Err(format!(
+                "--tolerance must be in (0, 1), got {}",
+                self.tolerance
+            ));
+        }
+        if self.max_iterations == 0 {
+            return Err("--max-iterations must be at least 1".into());
+        }
+        if !(self.omega > 0.0 && self.omega < 2.0) {
+            return Err(format!("--omega must be in (0, 2), got {}", self.omega));
+        }
+        if self.rays == 0 || self.rays > MAX_RAYS_PER_PAIR {
+            return Err(format!(
+                "--rays must be in 1..={MAX_RAYS_PER_PAIR}, got {}",
+                self.rays
+            ));
+        }
+        let request = SolveRequest {
+            patches,
+            form_factors: FormFactorSettings {
+                rays_per_pair: self.rays,
+            },
+            solver: SolverSettings {
+                tolerance: self.tolerance,
+                max_iterations: self.max_iterations,
+                relaxation: self.omega,
+                ..SolverSettings::default()
+            },
+            ..SolveRequest::default()
+        };
+        Ok(request.with_method(self.method, hierarchy))
+    }
+}
+
+/// What the user who asked for `asked` should be told about the leaf budget after a
+/// hierarchical solve: that the knob was coarsened to fit it, or that refinement stopped at it
+/// (in the flags' words, as both commands spell them).
+pub fn budget_warnings(asked: &HierarchySettings, stats: &HierarchyStats) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if stats.knob_used > asked.error {
+        warnings.push(format!(
+            "--error {} needs more than --max-leaves {} leaves here; refined at --error {} instead",
+            asked.error, asked.max_leaves, stats.knob_used
+        ));
+    }
+    if stats.leaf_budget_reached {
+        warnings.push(format!(
+            "refinement stopped at --max-leaves {} even at --error {}; some links carry more than \
+             that",
+            asked.max_leaves, stats.knob_used
+        ));
+    }
+    warnings
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Command {
+        #[command(flatten)]
+        solve: SolveArgs,
+    }
+
+    fn parse(flags: &[&str]) -> SolveArgs {
+        Command::parse_from([&["radcast"], flags].concat()).solve
+    }
+
+    #[test]
+    fn defaults_ask_for_the_library_defaults() {
+        let request = parse(&[]).request().expect("defaults are valid");
+        assert_eq!(request, SolveRequest::default());
+    }
+
+    #[test]
+    fn every_out_of_range_value_names_its_flag() {
+        for (flags, message) in [
+            (&["--error", "1"][..], "--error must be in (0, 1), got 1"),
+            (&["--max-leaves", "0"], "--max-leaves must be at least 1"),
+            (&["--patches", "0"], "--patches must be at least 1"),
+            (
+                &["--patch-size=-2"],
+                "--patch-size must be a positive length, got -2",
+            ),
+            (
+                &["--tolerance", "NaN"],
+                "--tolerance must be in (0, 1), got NaN",
+            ),
+            (
+                &["--max-iterations", "0"],
+                "--max-iterations must be at least 1",
+            ),
+            (&["--omega", "2"], "--omega must be in (0, 2), got 2"),
+            (&["--rays", "65"], "--rays must be in 1..=64, got 65"),
+        ] {
+            assert_eq!(
+                parse(flags).request(),
+                Err(message.to_string()),
+                "{flags:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_hierarchical_method_carries_its_knob_and_budget() {
+        let request = parse(&[
+            "--method",
+            "hierarchical",
+            "--error",
+            "0.1",
+            "--max-leaves",
+            "9",
+        ])
+        .request()
+        .expect("valid");
+        let hierarchy = request.hierarchy.expect("hierarchical");
+        assert_eq!((hierarchy.error, hierarchy.max_leaves), (0.1, 9));
+    }
+}

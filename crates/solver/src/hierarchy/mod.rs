@@ -1,0 +1,363 @@
+//! Hierarchical radiosity with clustering: light moves along links between elements at the
+//! level where the transfer is accurate enough, instead of through n^2 form factors on a
+//! uniform mesh. The leaves of the element trees are the patches the server streams.
+//!
+//! - **Elements** (Hanrahan, Salzman, Aupperle 1991, "A Rapid Hierarchical Radiosity
+//!   Algorithm"): each input face roots a quadtree (a quad into four quads, a triangle into four
+//!   similar triangles), split only when a link asks for it.
+//! - **Clusters** (Smits, Arvo, Greenberg 1994; Sillion 1995): a binary tree of median splits
+//!   over the input faces sits above them, so refinement starts from one self-link of the root,
+//!   not from faces^2 links: a face gathers from whole clusters while they are far enough. A
+//!   cluster link carries the sampled area-average kernel. Clusters only send: a receiving
+//!   cluster would hand its irradiance to faces that cannot see the source.
+//! - **Refinement** (BF with visibility): a link is kept when the radiosity error it can carry,
+//!   `rho_R (B_S dF + F dB_S)`, is within the tolerance. `dF` is the spread of the factor over
+//!   the receiver, kernel and visibility both (a bound, for a cluster), so partial occlusion
+//!   refines while full visibility and full occlusion do not. Between elements the receiver
+//!   splits for `dF` and the source for `dB_S`; with a cluster, the larger end splits.
+//!   Refinement runs again on each new solution until no link changes.
+//! - **Visibility**: a shaft between the two elements (Haines, Wallace 1994, "Shaft Culling for
+//!   Efficient Ray-Cast Radiosity") collects the faces that can block. None: clear, no rays. One
+//!   face that separates the two and covers every segment between them: hidden, no rays. Else
+//!   shadow rays.
+//! - **Reach**: a point every cosine ray from which meets a back face (under a box on the
+//!   floor) is buried; sources send their mean over the area light reaches.
+//! - **Solving**: pull (area-weighted means up the trees), gather along links, push (sums down
+//!   to the leaves) is a linear operator on the leaves, so it is a [`Transport`] and the same
+//!   GMRES and Jacobi solve it. No dense matrix anywhere: memory is O(elements + links).
+
+//!
+//! Files: [`tree`] the trees, [`shaft`] the blockers between a pair, [`refine`] the link
+//! decisions and the leaf budget, [`operator`] pull-gather-push on the leaves, [`reach`] the
+//! buried test; this file holds the public API and the refinement rounds.
+
+mod factor;
+mod operator;
+mod reach;
+mod refine;
+mod shaft;
+mod tree;
+
+#[cfg(test)]
+mod fixtures;
+
+use crate::Progress;
+use crate::geometry::Polygon;
+use crate::pair::FormFactorSettings;
+use crate::scene::{Rgb, Scene};
+use crate::solve::{NeedsEntries, SolveOutcome, SolverSettings, System, solve};
+use crate::visibility::Occluders;
+use operator::{Incoming, Slope};
+use rayon::prelude::*;
+use refine::{LeafBudget, Overflow, RefineTarget, Refinement};
+use tree::Node;
+
+/// The one accuracy knob of the hierarchical path, and the budget that bounds its memory.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HierarchySettings {
+    /// Relative error: links are refined until `rho_R (B_S dF + F dB_S)` is at most `error`
+    /// times the scene's mean reflected radiosity, and elements stop splitting at
+    /// [`MIN_RADIUS_PER_ERROR`] `* error` times their input face's radius, capped at the
+    /// scene's median face radius.
+    pub error: f64,
+    /// Refinement-and-solve rounds at most (each refines on the newest solution).
+    pub max_rounds: usize,
+    /// Leaves at most. A refinement that would pass it starts again at twice the knob (reported
+    /// as [`HierarchyStats::knob_used`]); past a knob of 0.5, elements stop splitting instead
+    /// ([`HierarchyStats::leaf_budget_reached`]). Memory runs about 2.3 KB per leaf (links and
+    /// the solver's vectors included), so the default stays near 1.2 GB.
+    pub max_leaves: usize,
+}
+
+impl Default for HierarchySettings {
+    fn default() -> Self {
+        HierarchySettings {
+            error: 0.03,
+            max_rounds: 4,
+            max_leaves: 500_000,
+        }
+    }
+}
+
+/// Smallest element radius, as a fraction of `error` times its input face's radius capped at
+/// the median face radius ([`smallest_scale`]; relative to geometry, so that a lamp far above
+/// a floor does not coarsen the floor's shadows). Chosen by measurement on the Cornell box and
+/// the shadow slab before the cap (docs/BENCHMARKS.md): 0.5 spent most leaves on contact lines
+/// for little RMS; 2 left contact lines and shadow edges too coarse.
+pub const MIN_RADIUS_PER_ERROR: f64 = 1.0;
+
+/// A kept link: `receiver` gathers `factor * B(source)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Link {
+    receiver: u32,
+    source: u32,
+    /// The form factor, visibility included (a sampled estimate when a cluster takes part).
+    factor: f32,
+    /// The factor's possible spread over the receiver (see the module notes), kept so that a
+    /// new solution can re-check the link without integrating it again.
+    spread: f32,
+    /// Where on the source the transfer is centred: the kernel-weighted mean of the source
+    /// points the receiver sees, from the source's centroid, in the source's tangent frame. The
+    /// link gathers the source's linear radiosity model there, not its mean.
+    offset: [f32; 2],
+}
+
+/// What refinement and solving cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct HierarchyStats {
+    /// Leaf elements: the patches of the solution.
+    pub elements: usize,
+    /// Links kept.
+    pub links: usize,
+    /// Cluster nodes above the input faces.
+    pub clusters: usize,
+    /// Refinement-and-solve rounds run.
+    pub rounds: usize,
+    /// Links whose visibility the shaft decided without rays (clear or hidden).
+    pub shaft_decided: u64,
+    /// Shadow rays cast.
+    #[serde(skip)]
+    pub rays: u64,
+    /// Solver iterations spent in the rounds before the final solve.
+    pub refinement_iterations: usize,
+    /// The error knob the hierarchy was refined to: the one asked for, or a coarser one when
+    /// that would have passed [`HierarchySettings::max_leaves`].
+    pub knob_used: f64,
+    /// Whether elements stopped splitting at [`HierarchySettings::max_leaves`] even at the
+    /// coarsest knob tried, leaving some links coarser than it asks.
+    pub leaf_budget_reached: bool,
+}
+
+/// The element and cluster trees of a scene, their links, and the link operator on the leaves.
+#[derive(Clone)]
+pub struct Hierarchy {
+    nodes: Vec<Node>,
+    /// Input faces in cluster order: every cluster covers a contiguous run.
+    order: Vec<u32>,
+    /// Prefix sums of face areas in `order` (for area-weighted sampling inside a cluster).
+    area_prefix: Vec<f64>,
+    /// Each input face's polygon.
+    faces: Vec<Polygon>,
+    /// Each input face's root element.
+    face_node: Vec<u32>,
+    /// Whether each input face's view is closed (its leaves' rows are normalised to one).
+    face_closed: Vec<bool>,
+    links: Vec<Link>,
+    /// The leaves, face by face.
+    leaves: Vec<u32>,
+    /// Links by receiver: `incoming[offsets[n]..offsets[n + 1]]` are node `n`'s.
+    offsets: Vec<u32>,
+    incoming: Vec<Incoming>,
+    /// Per leaf, the factor its gathered irradiance is multiplied by (1, or 1/row sum).
+    row_scale: Vec<f64>,
+    /// Per node ever a leaf, the share of its area not buried ([`reach`]); NaN until measured.
+    seen_share: Vec<f64>,
+    /// Per node, the area of its leaves that light can reach: what a source's mean is taken over.
+    seen_area: Vec<f64>,
+    /// Per element node, its linear radiosity model's weights ([`Hierarchy::slopes_of`]).
+    slopes: Vec<Slope>,
+    stats: HierarchyStats,
+}
+
+impl Hierarchy {
+    /// What refinement and solving cost so far.
+    pub fn stats(&self) -> HierarchyStats {
+        self.stats
+    }
+
+    /// Rebuilds the leaf list, the reached areas and the link operator after refinement.
+    fn index(&mut self, occluders: &Occluders) {
+        self.collect_leaves();
+        self.measure_seen_area(occluders);
+        self.fit_slopes();
+        self.index_links();
+        self.stats.elements = self.leaves.len();
+        self.stats.links = self.links.len();
+    }
+
+    /// Solves for the leaves' `emission` (one per leaf) from `initial`.
+    pub fn solve(
+        &self,
+        emission: &[Rgb],
+        initial: Option<&[Rgb]>,
+        settings: &SolverSettings,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<SolveOutcome, NeedsEntries> {
+        let reflectance: Vec<Rgb> = (0..self.leaves.len())
+            .map(|i| self.leaf_patch(i).reflectance)
+            .collect();
+        let area: Vec<f64> = (0..self.leaves.len())
+            .map(|i| self.leaf_patch(i).area)
+            .collect();
+        solve(
+            self,
+            &System {
+                reflectance: &reflectance,
+                emission,
+                area: &area,
+            },
+            settings,
+            initial,
+            progress,
+        )
+    }
+
+    /// The leaves' emission, W/m^2.
+    pub fn leaf_emission(&self) -> Vec<Rgb> {
+        (0..self.leaves.len())
+            .map(|i| self.leaf_patch(i).emission)
+            .collect()
+    }
+
+    /// Builds the hierarchy of `scene`: refines on an estimate, then, up to
+    /// `settings.max_rounds` times, solves and refines the links the solution shows too coarse.
+    /// Returns it with the last solution carried to its leaves, to start the final solve from.
+    pub fn build(
+        scene: &Scene,
+        occluders: &Occluders,
+        settings: &HierarchySettings,
+        rays: FormFactorSettings,
+        solver: &SolverSettings,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<Refined, NeedsEntries> {
+        let mut tree = Hierarchy::cluster_tree(scene);
+        tree.face_closed = tree
+            .face_node
+            .par_iter()
+            .enumerate()
+            .map(|(face, &n)| occluders.sees_closed_view(tree.element_patch(n), face))
+            .collect();
+        tree.index(occluders);
+        let run = Rounds {
+            occluders,
+            rays,
+            solver,
+            progress,
+            max_rounds: settings.max_rounds,
+            estimate: ambient_estimate(scene),
+        };
+        let mut knob = settings.error;
+        loop {
+            // Over the leaf budget, the whole refinement again at twice the knob: stopping one
+            // part-way leaves whichever elements came first fine and the rest coarse (the
+            // furnished room at knob 0.03 stopped so ran 17% RMS; refined at 0.2 it runs 9%).
+            // Past 0.5 there is nothing coarser to try, and elements stop splitting instead.
+            let budget = LeafBudget {
+                max_leaves: settings.max_leaves,
+                overflow: if 2.0 * knob < 1.0 {
+                    Overflow::Abandon
+                } else {
+                    Overflow::Freeze
+                },
+            };
+            if let Some(refined) = run.refine(tree.clone(), knob, budget)? {
+                return Ok(refined);
+            }
+            knob *= 2.0;
+        }
+    }
+}
+
+/// A refined hierarchy and the last solution of its refinement rounds, one value per leaf.
+pub struct Refined {
+    /// The elements, clusters and links.
+    pub hierarchy: Hierarchy,
+    /// Radiosity per leaf, W/m^2: a start for the final solve.
+    pub radiosity: Vec<Rgb>,
+}
+
+/// What every refinement attempt of one build shares.
+struct Rounds<'a> {
+    occluders: &'a Occluders,
+    rays: FormFactorSettings,
+    solver: &'a SolverSettings,
+    progress: &'a (dyn Fn(Progress) + Sync),
+    max_rounds: usize,
+    /// The ambient radiosity of the first estimate ([`ambient_estimate`]).
+    estimate: Rgb,
+}
+
+impl Rounds<'_> {
+    /// Refines `hierarchy` (unrefined, indexed) at error `knob`: first on the ambient estimate,
+    /// then on each new solution until no link needs refining or the rounds run out. `None`
+    /// when the leaf budget abandoned the attempt.
+    fn refine(
+        &self,
+        mut hierarchy: Hierarchy,
+        knob: f64,
+        budget: LeafBudget,
+    ) -> Result<Option<Refined>, NeedsEntries> {
+        let smallest = MIN_RADIUS_PER_ERROR * knob;
+        let mut radiosity: Vec<Rgb> = (0..hierarchy.leaves.len())
+            .map(|i| {
+                let patch = hierarchy.leaf_patch(i);
+                patch.emission + patch.reflectance * self.estimate
+            })
+            .collect();
+        let mut pending = if hierarchy.nodes.is_empty() {
+            Vec::new()
+        } else {
+            vec![(0, 0)]
+        };
+        for round in 0..self.max_rounds.max(1) {
+            if round > 0 {
+                let solved = hierarchy.solve(
+                    &hierarchy.leaf_emission(),
+                    Some(&radiosity),
+                    self.solver,
+                    self.progress,
+                )?;
+                hierarchy.stats.refinement_iterations += solved.iterations;
+                radiosity = solved.radiosity;
+            }
+            let sources = hierarchy.node_radiosity(&radiosity);
+            let target = RefineTarget {
+                tolerance: knob * hierarchy.mean_reflected(&radiosity),
+                smallest,
+            };
+            if round > 0 {
+                pending = hierarchy.take_links_to_redo(&sources, &target);
+                if pending.is_empty() {
+                    break;
+                }
+            }
+            let (before, inherited) = (hierarchy.nodes.len(), hierarchy.pull(&radiosity));
+            let refinement = hierarchy.refine(
+                sources,
+                &target,
+                self.occluders,
+                self.rays,
+                std::mem::take(&mut pending),
+                budget,
+            );
+            hierarchy.stats.rounds = round + 1;
+            if refinement == Refinement::Abandoned {
+                return Ok(None);
+            }
+            hierarchy.index(self.occluders);
+            radiosity = hierarchy.inherit(inherited, before);
+        }
+        hierarchy.stats.knob_used = knob;
+        Ok(Some(Refined {
+            hierarchy,
+            radiosity,
+        }))
+    }
+}
+
+/// The first estimate's ambient radiosity (Cohen, Chen, Wallace, Greenberg 1988): the emitted
+/// power spread over all area, reflected by the mean reflectance; each leaf starts at its
+/// emission plus its reflectance times this.
+fn ambient_estimate(scene: &Scene) -> Rgb {
+    let (mut power, mut reflected, mut total_area) = (Rgb::ZERO, Rgb::ZERO, 0.0);
+    for f in &scene.faces {
+        let a = f.polygon.area();
+        (power, reflected, total_area) = (
+            power + f.emission * a,
+            reflected + f.reflectance * a,
+            total_area + a,
+        );
+    }
+    let total_area = total_area.max(f64::MIN_POSITIVE);
+    power / (total_area * (Rgb::ONE - reflected / total_area).max(Rgb::splat(1e-3)))
+}

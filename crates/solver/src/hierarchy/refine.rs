@@ -1,0 +1,470 @@
+//! Refinement: each candidate link is kept, dropped, or split at the end whose splitting
+//! reduces its error most (BF refinement with visibility), until every kept link carries at
+//! most the tolerance; and the leaf budget that bounds how far it may go.
+
+use super::factor::{kernel_centre, tangent_coordinates};
+use super::shaft::Visibility;
+use super::tree::{MAX_DEPTH, Node};
+use super::{Hierarchy, Link};
+use crate::pair::FormFactorSettings;
+use crate::sampling::pair_seed;
+use crate::scene::Rgb;
+use crate::visibility::Occluders;
+use rayon::prelude::*;
+use std::sync::atomic::AtomicU64;
+
+/// What refinement decided for one link.
+enum Decision {
+    Drop,
+    Keep(Link),
+    SplitReceiver,
+    SplitSource,
+    /// A cluster's self-link: every pair of its children.
+    SplitBoth,
+}
+
+/// One end of a link.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum End {
+    Receiver,
+    Source,
+}
+
+/// Per node, what it sends as refinement sees it: the largest channel of its mean radiosity
+/// and the spread of that over its leaves, W/m^2.
+pub(super) struct NodeRadiosity {
+    mean: Vec<f64>,
+    spread: Vec<f64>,
+}
+
+impl NodeRadiosity {
+    /// Node `n`'s (mean, spread).
+    fn at(&self, n: u32) -> (f64, f64) {
+        (self.mean[n as usize], self.spread[n as usize])
+    }
+}
+
+/// How fine refinement goes.
+pub(super) struct RefineTarget {
+    /// Largest radiosity error a link may carry, W/m^2.
+    pub(super) tolerance: f64,
+    /// Smallest element radius, as a fraction of its size scale.
+    pub(super) smallest: f64,
+}
+
+/// The most leaves refinement may make, and what it does when a round would pass them.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct LeafBudget {
+    pub(super) max_leaves: usize,
+    pub(super) overflow: Overflow,
+}
+
+/// What to do when a round of splits would pass the leaf budget.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Overflow {
+    /// Stop at once: the caller starts again at a coarser knob.
+    Abandon,
+    /// Go on without element splits.
+    Freeze,
+}
+
+/// How a refinement ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Refinement {
+    /// Every pending link was kept, dropped or split to the end.
+    Finished,
+    /// The leaf budget stopped it part-way ([`Overflow::Abandon`]).
+    Abandoned,
+}
+
+/// Read-only state for deciding links in parallel.
+pub(super) struct Refiner<'a> {
+    pub(super) hierarchy: &'a Hierarchy,
+    pub(super) occluders: &'a Occluders,
+    pub(super) rays: FormFactorSettings,
+    sources: &'a NodeRadiosity,
+    /// Largest radiosity error a link may carry, W/m^2.
+    tolerance: f64,
+    /// Smallest element radius as a fraction of its face's.
+    smallest: f64,
+    pub(super) rays_cast: AtomicU64,
+    pub(super) shaft_decided: AtomicU64,
+}
+
+impl Refiner<'_> {
+    pub(super) fn node(&self, n: u32) -> &Node {
+        &self.hierarchy.nodes[n as usize]
+    }
+
+    /// Keep, drop or split the link from `source` to `receiver`.
+    fn decide(&self, receiver: u32, source: u32) -> Decision {
+        let (r, s) = (self.node(receiver), self.node(source));
+        if receiver == source {
+            return if r.element.is_none() {
+                Decision::SplitBoth
+            } else {
+                Decision::Drop
+            };
+        }
+        // Clusters gather nothing themselves: one that received would hand the same irradiance
+        // to every face below it, including faces that cannot see the source (light leaked
+        // through a wall whose two sides share a cluster). Links end at elements, and clusters
+        // only send.
+        if r.element.is_none() {
+            return Decision::SplitReceiver;
+        }
+        let Some(estimate) = self.estimate(receiver, source) else {
+            return Decision::Drop;
+        };
+        if estimate.visibility == Visibility::Hidden {
+            return Decision::Drop;
+        }
+        let errors = LinkErrors::new(r, self.sources.at(source), estimate.factor, estimate.spread);
+        match errors.end_to_split(r, s, self.tolerance, self.smallest) {
+            Some(End::Receiver) => return Decision::SplitReceiver,
+            Some(End::Source) => return Decision::SplitSource,
+            None => {}
+        }
+        let factor = self.factor(receiver, source, &estimate);
+        if factor <= 0.0 {
+            return Decision::Drop;
+        }
+        let offset = match (&s.element, estimate.visibility) {
+            (Some(e), Visibility::Partial | Visibility::Clear) => {
+                let centroid = estimate.centroid.unwrap_or_else(|| {
+                    kernel_centre(
+                        self.hierarchy.element_patch(receiver),
+                        &e.patch,
+                        pair_seed(receiver as usize, source as usize),
+                    )
+                });
+                tangent_coordinates(&e.patch, centroid)
+            }
+            _ => [0.0; 2],
+        };
+        Decision::Keep(Link {
+            receiver,
+            source,
+            factor: factor as f32,
+            spread: estimate.spread as f32,
+            offset,
+        })
+    }
+}
+
+impl Hierarchy {
+    /// Links from `pending` pairs, refined until every kept one is accurate enough; the rays
+    /// and shaft decisions are added to the stats. Past the budget's leaves it marks the
+    /// budget reached and then stops or goes on without element splits, as `budget` says.
+    pub(super) fn refine(
+        &mut self,
+        mut sources: NodeRadiosity,
+        target: &RefineTarget,
+        occluders: &Occluders,
+        rays: FormFactorSettings,
+        mut pending: Vec<(u32, u32)>,
+        budget: LeafBudget,
+    ) -> Refinement {
+        let (mut leaves, mut rays_cast, mut shaft_decided) = (self.leaves.len(), 0, 0);
+        while !pending.is_empty() {
+            let mut decide = |pairs: &[(u32, u32)], frozen: bool| {
+                let refiner = Refiner {
+                    hierarchy: self,
+                    occluders,
+                    rays,
+                    sources: &sources,
+                    tolerance: target.tolerance,
+                    smallest: smallest_while(frozen, target.smallest),
+                    rays_cast: AtomicU64::new(0),
+                    shaft_decided: AtomicU64::new(0),
+                };
+                let decisions: Vec<Decision> = pairs
+                    .par_iter()
+                    .map(|&(r, s)| refiner.decide(r, s))
+                    .collect();
+                rays_cast += refiner.rays_cast.into_inner();
+                shaft_decided += refiner.shaft_decided.into_inner();
+                decisions
+            };
+            let frozen = self.stats.leaf_budget_reached;
+            let mut decisions = decide(&pending, frozen);
+            if !frozen {
+                let (splits, new_leaves) = self.element_splits(&pending, &decisions);
+                if leaves + new_leaves <= budget.max_leaves {
+                    leaves += new_leaves;
+                } else if budget.overflow == Overflow::Abandon {
+                    self.stats.leaf_budget_reached = true;
+                    return Refinement::Abandoned;
+                } else {
+                    // Over budget: the pairs that asked for element splits decide again without
+                    // them.
+                    let pairs: Vec<(u32, u32)> = splits.iter().map(|&i| pending[i]).collect();
+                    splits
+                        .iter()
+                        .zip(decide(&pairs, true))
+                        .for_each(|(&i, decision)| decisions[i] = decision);
+                    self.stats.leaf_budget_reached = true;
+                }
+            }
+            let mut next = Vec::new();
+            for ((r, s), decision) in pending.into_iter().zip(decisions) {
+                match decision {
+                    Decision::Drop => {}
+                    Decision::Keep(link) => self.links.push(link),
+                    Decision::SplitReceiver => {
+                        self.split_for(r, &mut sources);
+                        next.extend(self.nodes[r as usize].children().map(|c| (c, s)));
+                    }
+                    Decision::SplitSource => {
+                        self.split_for(s, &mut sources);
+                        next.extend(self.nodes[s as usize].children().map(|c| (r, c)));
+                    }
+                    Decision::SplitBoth => {
+                        let children = self.nodes[r as usize].children();
+                        next.extend(
+                            children
+                                .clone()
+                                .flat_map(|a| children.clone().map(move |b| (a, b))),
+                        );
+                    }
+                }
+            }
+            pending = next;
+        }
+        self.stats.rays += rays_cast;
+        self.stats.shaft_decided += shaft_decided;
+        Refinement::Finished
+    }
+
+    /// Takes out of the kept links those that the new solution `sources` shows too coarse and
+    /// returns their pairs for refinement; only links that can still be split count.
+    pub(super) fn take_links_to_redo(
+        &mut self,
+        sources: &NodeRadiosity,
+        target: &RefineTarget,
+    ) -> Vec<(u32, u32)> {
+        let node = |n: u32| &self.nodes[n as usize];
+        let smallest = smallest_while(self.stats.leaf_budget_reached, target.smallest);
+        let (redo, keep): (Vec<Link>, Vec<Link>) = self.links.par_iter().partition(|l| {
+            let (r, s) = (node(l.receiver), node(l.source));
+            LinkErrors::new(r, sources.at(l.source), l.factor as f64, l.spread as f64)
+                .end_to_split(r, s, target.tolerance, smallest)
+                .is_some()
+        });
+        if !redo.is_empty() {
+            self.links = keep;
+        }
+        redo.iter().map(|l| (l.receiver, l.source)).collect()
+    }
+
+    /// Which of `decisions` (for `pending`) split a leaf element, and how many leaves those
+    /// splits add.
+    fn element_splits(
+        &self,
+        pending: &[(u32, u32)],
+        decisions: &[Decision],
+    ) -> (Vec<usize>, usize) {
+        let mut marked = vec![false; self.nodes.len()];
+        let (mut indices, mut added) = (Vec::new(), 0);
+        for (i, (&(r, s), decision)) in pending.iter().zip(decisions).enumerate() {
+            let n = match decision {
+                Decision::SplitReceiver => r,
+                Decision::SplitSource => s,
+                _ => continue,
+            };
+            if self.is_unsplit_element(n) {
+                indices.push(i);
+                if !std::mem::replace(&mut marked[n as usize], true) {
+                    added += 3;
+                }
+            }
+        }
+        (indices, added)
+    }
+
+    /// Subdivides `n` if it is an element, giving new children their parent's radiosity.
+    fn split_for(&mut self, n: u32, sources: &mut NodeRadiosity) {
+        if self.is_unsplit_element(n) {
+            self.subdivide(n);
+            let (mean, spread) = sources.at(n);
+            sources.mean.resize(self.nodes.len(), mean);
+            // A new child inherits its parent's mean; its spread is unknown but at most the
+            // parent's.
+            sources.spread.resize(self.nodes.len(), spread);
+        }
+    }
+
+    /// Per node, the largest channel of its area-mean radiosity and the spread of that over
+    /// its leaves, from per-leaf radiosity.
+    pub(super) fn node_radiosity(&self, leaf_radiosity: &[Rgb]) -> NodeRadiosity {
+        let mean = self.pull(leaf_radiosity);
+        let mut low = vec![f64::INFINITY; self.nodes.len()];
+        let mut high = vec![0.0f64; self.nodes.len()];
+        // A buried leaf sends nothing anyone gathers: its value is no spread of the source.
+        for (i, &leaf) in self
+            .leaves
+            .iter()
+            .enumerate()
+            .filter(|(_, leaf)| self.seen_area[**leaf as usize] > 0.0)
+        {
+            let b = leaf_radiosity[i].max_element();
+            (low[leaf as usize], high[leaf as usize]) = (b, b);
+        }
+        for n in (0..self.nodes.len()).rev() {
+            for c in self.nodes[n].children() {
+                low[n] = low[n].min(low[c as usize]);
+                high[n] = high[n].max(high[c as usize]);
+            }
+        }
+        let spread = high
+            .iter()
+            .zip(&low)
+            .map(|(h, l)| (h - l).max(0.0))
+            .collect();
+        NodeRadiosity {
+            mean: mean.iter().map(|b| b.max_element()).collect(),
+            spread,
+        }
+    }
+}
+
+/// The radiosity errors a link can carry, W/m^2.
+struct LinkErrors {
+    /// `rho_R B_S dF`, from the factor's spread over the receiver: only splitting the receiver
+    /// reduces it.
+    receiver: f64,
+    /// `rho_R F dB_S`, from the source's own spread: only splitting the source reduces it.
+    source: f64,
+}
+
+impl LinkErrors {
+    /// The errors of a link into `receiver` with `factor` and its `spread`, from its source's
+    /// (mean, spread) of radiosity.
+    fn new(
+        receiver: &Node,
+        (radiosity, radiosity_spread): (f64, f64),
+        factor: f64,
+        spread: f64,
+    ) -> Self {
+        LinkErrors {
+            receiver: receiver.reflectance * radiosity * spread,
+            source: receiver.reflectance * factor * radiosity_spread,
+        }
+    }
+
+    /// Which end of the link from `s` to `r` to split, `None` when no end that would help can
+    /// be split. Between elements the factor is integrated at the receiver's points for any
+    /// source size, so the receiver helps against the receiver error (the factor's spread) and
+    /// the source against the source error (its radiosity's spread): the end with the larger
+    /// error splits, or the other if that one is at the smallest size and its own error still
+    /// exceeds the `tolerance`. With a cluster at either end, whose factor is only a bound or a
+    /// sample, the larger end is split.
+    fn end_to_split(&self, r: &Node, s: &Node, tolerance: f64, smallest: f64) -> Option<End> {
+        let can_split = |n: &Node| {
+            n.element
+                .as_ref()
+                .is_none_or(|e| n.radius > smallest * e.size_scale && e.depth < MAX_DEPTH)
+        };
+        if self.receiver + self.source <= tolerance {
+            return None;
+        }
+        if r.element.is_some() && s.element.is_some() {
+            let (first, second, second_error) = if self.receiver >= self.source {
+                ((End::Receiver, r), (End::Source, s), self.source)
+            } else {
+                ((End::Source, s), (End::Receiver, r), self.receiver)
+            };
+            return if can_split(first.1) {
+                Some(first.0)
+            } else {
+                (second_error > tolerance && can_split(second.1)).then_some(second.0)
+            };
+        }
+        match (can_split(r), can_split(s)) {
+            (true, true) if r.radius >= s.radius => Some(End::Receiver),
+            (true, true) => Some(End::Source),
+            (true, false) => Some(End::Receiver),
+            (false, true) => Some(End::Source),
+            (false, false) => None,
+        }
+    }
+}
+
+/// The smallest element radius (per error and face scale) to refine with: none can split once
+/// the leaf budget is `frozen`.
+fn smallest_while(frozen: bool, smallest: f64) -> f64 {
+    if frozen { f64::INFINITY } else { smallest }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hierarchy::MIN_RADIUS_PER_ERROR;
+    use crate::hierarchy::fixtures::build;
+    use crate::scene::{Material, Scene};
+    use glam::{DVec3, dvec3};
+
+    #[test]
+    fn a_large_floor_refines_to_the_scale_of_what_stands_on_it() {
+        // A 20 m floor, a 1 m box on it and a 1 m lamp above: the median face is the box's.
+        let mut scene = Scene::default();
+        let grey = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
+        let mut add = |origin: DVec3, u: DVec3, v: DVec3, material: Material| {
+            let object = scene.add_object("part");
+            scene.add_polygon(
+                object,
+                &[origin, origin + u, origin + u + v, origin + v],
+                material,
+            );
+        };
+        add(DVec3::ZERO, z * 20.0, x * 20.0, grey);
+        let o = dvec3(9.5, 0.0, 9.5);
+        for (origin, u, v) in [
+            (o + y, z, x),
+            (o, z, y),
+            (o + x, y, z),
+            (o, y, x),
+            (o + z, x, y),
+        ] {
+            add(origin, u, v, grey);
+        }
+        add(
+            dvec3(11.0, 3.0, 9.5),
+            x,
+            z,
+            Material {
+                reflectance: Rgb::ZERO,
+                emission: Rgb::splat(10.0),
+            },
+        );
+        let error = 0.1;
+        let hierarchy = build(&scene, error);
+        let floor_leaves = hierarchy
+            .leaves
+            .iter()
+            .map(|&n| &hierarchy.nodes[n as usize])
+            .filter(|n| n.element.as_ref().is_some_and(|e| e.patch.face == 0));
+        let finest = floor_leaves.map(|n| n.radius).fold(f64::INFINITY, f64::min);
+        let (floor_radius, box_radius) = (
+            scene.faces[0].polygon.radius(),
+            scene.faces[1].polygon.radius(),
+        );
+        println!(
+            "finest floor leaf radius {finest:.4} (floor radius {floor_radius:.2}, box face {box_radius:.3})"
+        );
+        // Far below the floor's own scale, and not below the box's: a leaf is at most half its
+        // splittable parent.
+        assert!(
+            finest < MIN_RADIUS_PER_ERROR * error * floor_radius / 4.0,
+            "{finest}"
+        );
+        assert!(
+            finest > MIN_RADIUS_PER_ERROR * error * box_radius / 2.0,
+            "{finest}"
+        );
+    }
+}

@@ -1,0 +1,254 @@
+//! Shafts between pairs of elements (Haines, Wallace 1994, "Shaft Culling for Efficient
+//! Ray-Cast Radiosity"): the faces that can block a pair, found by walking the cluster tree, so
+//! that most links need no shadow rays at all.
+
+use super::Hierarchy;
+use super::tree::{Bounds, union};
+use crate::geometry::{Polygon, bounds};
+use crate::mesh::Patch;
+use glam::DVec3;
+
+/// Faces in a shaft tested as a single blocker before rays decide.
+pub(super) const MAX_BLOCKER_CANDIDATES: usize = 4;
+
+/// The convex hull of two boxes as their union box cut by up to 12 planes through matching
+/// edges (Haines, Wallace 1994): a point is outside when `normal . p > offset` for a plane.
+struct Shaft {
+    union: Bounds,
+    planes: [(DVec3, f64); 12],
+    /// Planes in use.
+    count: usize,
+    /// Margin that keeps the test conservative against round-off.
+    margin: f64,
+}
+
+impl Shaft {
+    fn new(a: Bounds, b: Bounds) -> Shaft {
+        let union = union(a, b);
+        // Which box alone sets the union's face on `axis` (`high`: its max side): Some(true) a,
+        // Some(false) b, None both.
+        let side = |bounds: Bounds, axis: usize, high: bool| {
+            if high { bounds.1[axis] } else { bounds.0[axis] }
+        };
+        let owner = |axis: usize, high: bool| {
+            let (va, vb) = (side(a, axis, high), side(b, axis, high));
+            if va == vb {
+                None
+            } else {
+                Some((va > vb) == high)
+            }
+        };
+        let mut shaft = Shaft {
+            union,
+            planes: [(DVec3::ZERO, 0.0); 12],
+            count: 0,
+            margin: 1e-9 * (union.1 - union.0).length(),
+        };
+        for i in 0..3 {
+            for j in i + 1..3 {
+                for high_i in [false, true] {
+                    for high_j in [false, true] {
+                        let (Some(oi), Some(oj)) = (owner(i, high_i), owner(j, high_j)) else {
+                            continue;
+                        };
+                        if oi == oj {
+                            continue;
+                        }
+                        // The plane through the (i, j) edge of a and the same edge of b, facing
+                        // the union's corner they cut off.
+                        let (pa, pb) = (
+                            (side(a, i, high_i), side(a, j, high_j)),
+                            (side(b, i, high_i), side(b, j, high_j)),
+                        );
+                        let mut normal = DVec3::ZERO;
+                        normal[i] = pb.1 - pa.1;
+                        normal[j] = pa.0 - pb.0;
+                        let towards_corner = normal[i] * if high_i { 1.0 } else { -1.0 }
+                            + normal[j] * if high_j { 1.0 } else { -1.0 };
+                        if towards_corner < 0.0 {
+                            normal = -normal;
+                        }
+                        shaft.planes[shaft.count] = (normal, normal[i] * pa.0 + normal[j] * pa.1);
+                        shaft.count += 1;
+                    }
+                }
+            }
+        }
+        shaft
+    }
+
+    /// False only when `bounds` lies wholly outside the shaft.
+    fn may_meet_box(&self, (lo, hi): Bounds) -> bool {
+        let m = self.margin;
+        if lo.cmpgt(self.union.1 + m).any() || hi.cmplt(self.union.0 - m).any() {
+            return false;
+        }
+        self.planes[..self.count].iter().all(|(normal, offset)| {
+            let nearest = DVec3::select(normal.cmpgt(DVec3::ZERO), lo, hi);
+            normal.dot(nearest) <= offset + m * normal.length()
+        })
+    }
+
+    /// False only when every point lies outside one and the same bounding plane of the shaft.
+    fn may_meet_points(&self, points: &[DVec3]) -> bool {
+        let m = self.margin;
+        for axis in 0..3 {
+            if points.iter().all(|p| p[axis] > self.union.1[axis] + m)
+                || points.iter().all(|p| p[axis] < self.union.0[axis] - m)
+            {
+                return false;
+            }
+        }
+        self.planes[..self.count].iter().all(|(normal, offset)| {
+            points
+                .iter()
+                .any(|p| normal.dot(*p) <= offset + m * normal.length())
+        })
+    }
+}
+
+/// Whether face `blocker` lies strictly between the point sets `a` and `b` (convex polygons'
+/// corners) and covers every segment from one to the other: all such segments cross its plane
+/// inside the convex hull of the corner-to-corner crossings, so those crossings decide.
+fn blocks_every_segment(blocker: &Polygon, normal: DVec3, a: &[DVec3], b: &[DVec3]) -> bool {
+    let c = blocker.corners();
+    let tolerance = 1e-9 * blocker.radius();
+    let height = |p: &DVec3| (*p - c[0]).dot(normal);
+    let (above_a, below_a) = (
+        a.iter().all(|p| height(p) > tolerance),
+        a.iter().all(|p| height(p) < -tolerance),
+    );
+    let (above_b, below_b) = (
+        b.iter().all(|p| height(p) > tolerance),
+        b.iter().all(|p| height(p) < -tolerance),
+    );
+    if !((above_a && below_b) || (below_a && above_b)) {
+        return false;
+    }
+    a.iter().all(|p| {
+        b.iter().all(|q| {
+            let (hp, hq) = (height(p), height(q));
+            let x = *p + (*q - *p) * (hp / (hp - hq));
+            // Strictly inside every edge (CCW about `normal`), by a relative margin.
+            (0..c.len()).all(|k| {
+                let edge = c[(k + 1) % c.len()] - c[k];
+                edge.cross(x - c[k]).dot(normal) > 1e-9 * edge.length_squared()
+            })
+        })
+    })
+}
+
+/// How the shaft saw a pair of elements.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(super) enum Visibility {
+    /// Nothing can block: no rays.
+    Clear,
+    /// One face covers every segment between them: no rays.
+    Hidden,
+    /// Shadow rays decide.
+    Partial,
+    /// A cluster takes part: the factor is sampled with rays.
+    Sampled,
+}
+
+impl Hierarchy {
+    /// Clear, hidden or partial, from the faces in the shaft between `p` and `q`.
+    pub(super) fn shaft_visibility(&self, p: &Patch, q: &Patch) -> Visibility {
+        let (cp, cq) = (p.polygon.corners(), q.polygon.corners());
+        let shaft = Shaft::new(bounds(cp.iter().copied()), bounds(cq.iter().copied()));
+        let mut candidates = 0;
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            let node = &self.nodes[n as usize];
+            if !shaft.may_meet_box(node.bounds) {
+                continue;
+            }
+            let Some(element) = &node.element else {
+                stack.extend(node.children());
+                continue;
+            };
+            // An input face (the search never goes below them).
+            let face = element.patch.face;
+            if face == p.face
+                || face == q.face
+                || !shaft.may_meet_points(self.faces[face as usize].corners())
+            {
+                continue;
+            }
+            if blocks_every_segment(&self.faces[face as usize], element.patch.normal, cp, cq) {
+                return Visibility::Hidden;
+            }
+            // Rays decide from here; looking further for a single face that hides everything
+            // costs a walk over every face in a shaft across a furnished room.
+            candidates += 1;
+            if candidates == MAX_BLOCKER_CANDIDATES {
+                return Visibility::Partial;
+            }
+        }
+        if candidates == 0 {
+            return Visibility::Clear;
+        }
+        Visibility::Partial
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::splitmix64;
+    use glam::dvec3;
+
+    #[test]
+    fn a_shaft_holds_every_segment_between_its_boxes_and_nothing_beside_them() {
+        let a = (dvec3(0.0, 0.0, 0.0), dvec3(1.0, 1.0, 1.0));
+        let b = (dvec3(4.0, 3.0, -1.0), dvec3(5.0, 5.0, 0.5));
+        let shaft = Shaft::new(a, b);
+        assert!(shaft.count > 0);
+        let mut seed = 7u64;
+        let mut unit = || {
+            seed = splitmix64(seed);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..1000 {
+            let p = a.0 + (a.1 - a.0) * DVec3::new(unit(), unit(), unit());
+            let q = b.0 + (b.1 - b.0) * DVec3::new(unit(), unit(), unit());
+            let x = p.lerp(q, unit());
+            assert!(
+                shaft.may_meet_box((x, x)),
+                "{x} lies on a segment between the boxes"
+            );
+        }
+        // Inside the union box but off the hull: the corner regions the planes cut away.
+        assert!(!shaft.may_meet_box((dvec3(0.0, 4.5, 0.0), dvec3(0.5, 5.0, 0.2))));
+        assert!(!shaft.may_meet_box((dvec3(4.5, 0.0, 0.0), dvec3(5.0, 0.5, 0.2))));
+        assert!(!shaft.may_meet_points(&[dvec3(6.0, 0.0, 0.0), dvec3(7.0, 1.0, 0.0)]));
+    }
+
+    #[test]
+    fn one_face_hides_a_pair_only_when_it_covers_every_segment() {
+        let square = |z: f64, half: f64| {
+            [
+                dvec3(-half, -half, z),
+                dvec3(half, -half, z),
+                dvec3(half, half, z),
+                dvec3(-half, half, z),
+            ]
+        };
+        let (below, above) = (square(0.0, 0.5), square(2.0, 0.5));
+        let [a, b, c, d] = square(1.0, 2.0);
+        let big = Polygon::quad(a, b, c, d);
+        assert!(blocks_every_segment(&big, big.normal(), &below, &above));
+        let [a, b, c, d] = square(1.0, 0.4);
+        let small = Polygon::quad(a, b, c, d);
+        assert!(
+            !blocks_every_segment(&small, small.normal(), &below, &above),
+            "segments pass around a smaller square"
+        );
+        let [a, b, c, d] = square(0.0, 2.0);
+        let level = Polygon::quad(a, b, c, d);
+        assert!(
+            !blocks_every_segment(&level, level.normal(), &below, &above),
+            "a face in the plane of one end separates nothing"
+        );
+    }
+}
