@@ -4,7 +4,7 @@
 use futures_util::StreamExt;
 use server::solving::{prepare, serve_edits, shared_for, solve_and_publish};
 use server::{Limits, Shared, routes};
-use solver::{HierarchySettings, MethodChoice, PatchTarget, Rgb, SolveRequest};
+use solver::{HierarchySettings, MethodChoice, MoveWork, PatchTarget, Rgb, SolveRequest};
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
@@ -329,6 +329,9 @@ fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation
     session.solve(&solver::no_progress);
     let offset = glam::dvec3(40.0, 0.0, -30.0);
     let moved = session.translate("short_block", offset).unwrap();
+    let MoveWork::Dense(work) = moved.work else {
+        panic!("a dense session updates its matrix: {moved:?}")
+    };
     session.solve(&solver::no_progress);
 
     // From scratch: the same scene with the block moved and the light dimmed.
@@ -403,13 +406,13 @@ fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation
     let all_pairs = n * (n - 1) / 2;
     println!(
         "moved the short block: {} of {all_pairs} pairs traced, {} of {} entries integrated, in {:.3} s",
-        moved.pairs,
-        moved.entries,
+        work.pairs,
+        work.entries,
         n * n,
         moved.seconds
     );
-    assert!(moved.pairs > 0 && moved.pairs < all_pairs, "{moved:?}");
-    assert!(moved.entries < n * n / 2, "{moved:?}");
+    assert!(work.pairs > 0 && work.pairs < all_pairs, "{moved:?}");
+    assert!(work.entries < n * n / 2, "{moved:?}");
     // Unknown objects and non-finite offsets are refused.
     assert_eq!(
         session.translate("sofa", offset),
@@ -542,14 +545,30 @@ async fn a_hierarchical_server_streams_its_leaves_and_new_leaves_after_a_move() 
         .unwrap() as u32;
     moved.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
     let (leaves, expected) = solve(moved);
-    let geometry = tokio::task::spawn_blocking(move || {
-        client::fetch_geometry(&format!("http://{address}")).unwrap()
+    let (geometry, scene_version, summary) = tokio::task::spawn_blocking(move || {
+        let base = format!("http://{address}");
+        let response = ureq::get(&format!("{base}/api/scene")).call().unwrap();
+        let version = response.headers()["x-radcast-geometry-version"]
+            .to_str()
+            .unwrap()
+            .to_string();
+        (
+            client::fetch_geometry(&base).unwrap(),
+            version,
+            client::fetch_solution(&base).unwrap(),
+        )
     })
     .await
     .unwrap();
     assert_eq!(
         (geometry.patches.len(), viewer.buffer.colours.len()),
         (leaves, leaves)
+    );
+    // One source of truth: the summary counts the new leaves and names the new geometry.
+    assert_eq!(scene_version, "2");
+    assert_eq!(
+        (summary.patch_count as usize, summary.geometry_version),
+        (leaves, 2)
     );
     assert_eq!(mismatch(&viewer.buffer, &expected), None);
 }

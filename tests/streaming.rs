@@ -155,13 +155,25 @@ async fn several_viewers_end_with_the_servers_buffer() {
         "{checksums:?} vs {}",
         summary.checksum
     );
-    // The same summary over HTTP, as a viewer in another language would read it.
+    // The same summary over HTTP: typed as the client reads it, and as plain JSON as a viewer
+    // in another language would (the types docs/PROTOCOL.md gives).
     let base = client::http_base(&url).unwrap();
-    let json = tokio::task::spawn_blocking(move || client::fetch_solution(&base))
-        .await
-        .unwrap()
-        .unwrap();
+    let (typed, raw) = tokio::task::spawn_blocking(move || {
+        let raw = client::http_get(&format!("{base}/api/solution"), 1 << 24).unwrap();
+        (client::fetch_solution(&base).unwrap(), raw)
+    })
+    .await
+    .unwrap();
+    assert_eq!(typed, summary);
+    let json: serde_json::Value = serde_json::from_slice(&raw).unwrap();
     assert_eq!(json["checksum"].as_u64(), Some(summary.checksum as u64));
+    assert_eq!(json["scale"].as_f64(), Some(summary.scale as f64));
+    assert_eq!(json["scene_id"].as_str().map(str::len), Some(16));
+    assert_eq!(
+        json["patch_count"].as_u64(),
+        Some(summary.patch_count as u64)
+    );
+    assert_eq!(json["geometry_version"].as_u64(), Some(1));
     assert_eq!(json["report"]["method"], "gmres");
     let glb = tokio::task::spawn_blocking(move || {
         client::http_get(&format!("http://{address}/api/scene.glb"), 1 << 26)

@@ -4,6 +4,7 @@
 pub mod load;
 pub mod render;
 pub mod session;
+pub mod viewer;
 
 use anyhow::{Context, bail};
 
@@ -49,8 +50,9 @@ pub fn raise_file_limit() -> u64 {
     rlimit::increase_nofile_limit(u64::MAX).unwrap_or(0)
 }
 
-/// `/api/solution` as JSON.
-pub fn fetch_solution(base: &str) -> anyhow::Result<serde_json::Value> {
+/// `/api/solution`.
+pub fn fetch_solution(base: &str) -> anyhow::Result<wire::SolutionSummary> {
     let bytes = http_get(&format!("{base}/api/solution"), 1 << 24)?;
-    serde_json::from_slice(&bytes).with_context(|| format!("{base}/api/solution is not JSON"))
+    serde_json::from_slice(&bytes)
+        .with_context(|| format!("{base}/api/solution is not a solution summary"))
 }

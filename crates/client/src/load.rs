@@ -1,11 +1,10 @@
 //! `radcast-client load`: many viewers in one process, each decoding and applying every frame
 //! like a real one, with latency measured from the server's send stamp in each frame.
 
-use futures_util::{SinkExt, StreamExt};
+use crate::session::{next_binary, request_full};
+use crate::viewer::{Step, Viewer};
 use serde::Serialize;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
-use tokio_tungstenite::tungstenite::Message;
-use wire::{ApplyError, ClientMessage, PatchBuffer, ServerMessage};
+use std::time::{Duration, Instant};
 
 /// What one viewer saw.
 #[derive(Debug, Default)]
@@ -30,12 +29,6 @@ pub struct ViewerStats {
     /// published after the viewer connected: the frame a viewer joins with carries the stamp
     /// of a state published earlier, which measures its age, not delivery.
     pub latencies_us: Vec<u64>,
-}
-
-fn now_micros() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_micros() as u64)
 }
 
 /// Connects with buffers sized for one viewer of many: tungstenite's 128 KiB defaults, times
@@ -76,42 +69,35 @@ pub async fn run_viewer(url: String, delay: Duration, deadline: Instant) -> View
     };
     stats.connected = true;
     stats.connect = start.elapsed();
-    let joined_at = now_micros();
-    let mut buffer = PatchBuffer::default();
+    let joined_at = wire::unix_micros_now();
+    let mut viewer = Viewer::default();
     loop {
         let next = tokio::time::timeout(
             deadline.saturating_duration_since(Instant::now()),
-            socket.next(),
+            next_binary(&mut socket),
         )
         .await;
         let data = match next {
             Err(_) => break, // the run is over
-            Ok(Some(Ok(Message::Binary(data)))) => data,
-            Ok(Some(Ok(Message::Close(_)))) | Ok(None) => {
-                stats.failure = Some("the server closed the connection".into());
+            Ok(None) => {
+                stats.failure = Some("the connection ended".into());
                 break;
             }
-            Ok(Some(Ok(_))) => continue,
             Ok(Some(Err(error))) => {
                 stats.failure = Some(error.to_string());
                 break;
             }
+            Ok(Some(Ok(data))) => data,
         };
-        let received = now_micros();
-        let message = match ServerMessage::decode(&data) {
-            Ok(message) => message,
+        let received = wire::unix_micros_now();
+        match viewer.receive(&data) {
             Err(error) => {
-                stats.failure = Some(format!("bad frame: {error}"));
+                stats.failure = Some(error.to_string());
                 break;
             }
-        };
-        let sent_at = match &message {
-            ServerMessage::Hello(_) | ServerMessage::GeometryChanged { .. } => continue,
-            ServerMessage::Full(frame) => frame.info.sent_at_unix_micros,
-            ServerMessage::Delta(frame) => frame.info.sent_at_unix_micros,
-        };
-        match buffer.apply(&message) {
-            Ok(()) => {
+            Ok(Step::Hello(_) | Step::GeometryChanged { .. }) => {}
+            Ok(Step::Applied { info, .. }) => {
+                let sent_at = info.sent_at_unix_micros;
                 stats.frames += 1;
                 stats.bytes += data.len() as u64;
                 stats.arrivals.push((sent_at, received));
@@ -120,13 +106,9 @@ pub async fn run_viewer(url: String, delay: Duration, deadline: Instant) -> View
                 }
                 stats.first_frame.get_or_insert_with(|| start.elapsed());
             }
-            Err(ApplyError::BaseMismatch { .. }) => {
+            Ok(Step::NeedsFull) => {
                 stats.resyncs += 1;
-                if socket
-                    .send(Message::Binary(ClientMessage::RequestFull.encode().into()))
-                    .await
-                    .is_err()
-                {
+                if request_full(&mut socket).await.is_err() {
                     break;
                 }
             }

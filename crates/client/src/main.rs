@@ -3,7 +3,8 @@
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
 use client::render::{View, render};
-use client::session::{ViewerOutcome, watch_until_final};
+use client::session::{ViewerOutcome, next_binary, request_full, watch_until_final};
+use client::viewer::{Step, Viewer};
 use client::{fetch_geometry, fetch_solution, http_base};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -178,9 +179,7 @@ impl Editor {
     fn send(&self, k: u64) -> anyhow::Result<u64> {
         let factor = if k % 2 == 0 { 0.5 } else { 1.0 };
         let body = serde_json::json!({ "emission": self.emission.map(|c| c * factor) }).to_string();
-        let at = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)?
-            .as_micros() as u64;
+        let at = wire::unix_micros_now();
         ureq::put(&self.url)
             .header("Authorization", &format!("Bearer {}", self.token))
             .header("Content-Type", "application/json")
@@ -308,9 +307,6 @@ async fn load(
 }
 
 async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> anyhow::Result<()> {
-    use futures_util::{SinkExt, StreamExt};
-    use tokio_tungstenite::tungstenite::Message;
-    use wire::{ClientMessage, PatchBuffer, ServerMessage};
     let fetch = || {
         let base = http_base(url);
         tokio::task::spawn_blocking(move || fetch_geometry(&base?))
@@ -326,63 +322,54 @@ async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> any
     let (mut socket, _) = tokio_tungstenite::connect_async(url)
         .await
         .with_context(|| format!("connecting to {url}"))?;
-    let mut buffer = PatchBuffer::default();
+    let mut viewer = Viewer::default();
     let mut seen = 0u64;
-    while let Some(message) = socket.next().await {
-        let Message::Binary(data) = message? else {
-            continue;
-        };
-        let message = ServerMessage::decode(&data)?;
-        let (changed, sent_at) = match &message {
-            ServerMessage::Hello(hello) => {
+    while let Some(data) = next_binary(&mut socket).await {
+        let data = data?;
+        let (full, changed, info) = match viewer.receive(&data)? {
+            Step::Hello(hello) => {
                 println!(
                     "hello: scene {:016x}, {} patches, protocol {}",
                     hello.scene_id, hello.patch_count, hello.protocol_version
                 );
                 continue;
             }
-            ServerMessage::GeometryChanged { geometry_version } => {
+            Step::GeometryChanged { geometry_version } => {
                 println!("geometry changed: version {geometry_version}");
                 if geometry.is_some() {
                     geometry = Some(fetch().await??);
                 }
                 continue;
             }
-            ServerMessage::Full(frame) => {
-                let changed = if buffer.colours.len() == frame.colours.len() {
-                    wire::changes(&buffer.colours, &frame.colours).0.len()
-                } else {
-                    frame.colours.len()
-                };
-                (changed, frame.info.sent_at_unix_micros)
+            Step::NeedsFull => {
+                request_full(&mut socket).await?;
+                continue;
             }
-            ServerMessage::Delta(frame) => (frame.indices.len(), frame.info.sent_at_unix_micros),
+            Step::Applied {
+                full,
+                changed,
+                info,
+            } => (full, changed, info),
         };
-        if buffer.apply(&message).is_err() {
-            socket
-                .send(Message::Binary(ClientMessage::RequestFull.encode().into()))
-                .await?;
-            continue;
-        }
-        let info = buffer.info.context("a frame was applied")?;
-        let now = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)?
-            .as_micros() as u64;
-        let kind = if matches!(message, ServerMessage::Full(_)) {
-            "full"
-        } else {
-            "delta"
-        };
+        let latency_ms =
+            wire::unix_micros_now().saturating_sub(info.sent_at_unix_micros) as f64 / 1e3;
         println!(
-            "version {}: {kind}, {changed} patches changed, {} bytes, latency {:.1} ms{}",
+            "version {}: {}, {changed} patches changed, {} bytes, latency {latency_ms:.1} ms{}",
             info.solution_version,
+            if full { "full" } else { "delta" },
             data.len(),
-            now.saturating_sub(sent_at) as f64 / 1e3,
             if info.is_final { ", final" } else { "" }
         );
         if let (Some(dir), Some(geometry), true) = (&out_dir, &geometry, info.is_final) {
             let path = dir.join(format!("version-{:06}.png", info.solution_version));
-            render(geometry, &buffer, &View::for_scene(geometry), 512, 512).write_png(&path)?;
+            render(
+                geometry,
+                viewer.buffer(),
+                &View::for_scene(geometry),
+                512,
+                512,
+            )
+            .write_png(&path)?;
         }
         seen += 1;
         if updates.is_some_and(|n| seen >= n) {
@@ -428,9 +415,7 @@ async fn view(
         let base = base.clone();
         tokio::task::spawn_blocking(move || fetch_solution(&base)).await??
     };
-    let expected = solution["checksum"]
-        .as_u64()
-        .context("/api/solution has no checksum")? as u32;
+    let expected = solution.checksum;
     let cameras = if cameras.is_empty() {
         vec![View::for_scene(&geometry)]
     } else {

@@ -1,10 +1,11 @@
-//! One viewer's WebSocket session: hello, then frames applied to a [`PatchBuffer`].
+//! One viewer's WebSocket session: the socket side of a [`Viewer`].
 
-use anyhow::{Context, bail};
+use crate::viewer::{Step, Viewer};
+use anyhow::{Context, anyhow, bail};
 use futures_util::{SinkExt, StreamExt};
 use std::time::{Duration, Instant};
-use tokio_tungstenite::tungstenite::Message;
-use wire::{ApplyError, ClientMessage, Hello, PatchBuffer, ServerMessage};
+use tokio_tungstenite::tungstenite::{Bytes, Message};
+use wire::{ClientMessage, Hello, PatchBuffer};
 
 /// A viewer's WebSocket.
 pub type Socket =
@@ -32,53 +33,51 @@ pub async fn watch_until_final(url: &str, limit: Duration) -> anyhow::Result<Vie
         .with_context(|| format!("{url}: no final frame within {limit:?}"))?
 }
 
+/// The next binary message on `socket`: `None` when the connection ends; an error when it
+/// fails or the server closes it.
+pub async fn next_binary(socket: &mut Socket) -> Option<anyhow::Result<Bytes>> {
+    while let Some(message) = socket.next().await {
+        return Some(match message {
+            Ok(Message::Binary(data)) => Ok(data),
+            Ok(Message::Close(frame)) => {
+                Err(anyhow!("the server closed the connection: {frame:?}"))
+            }
+            Ok(_) => continue,
+            Err(error) => Err(anyhow!("connection failed: {error}")),
+        });
+    }
+    None
+}
+
+/// Asks the server for a full frame (after [`Step::NeedsFull`]).
+pub async fn request_full(socket: &mut Socket) -> anyhow::Result<()> {
+    socket
+        .send(Message::Binary(ClientMessage::RequestFull.encode().into()))
+        .await
+        .context("asking for a full frame")
+}
+
 async fn run(url: &str) -> anyhow::Result<ViewerOutcome> {
     let start = Instant::now();
     let (mut socket, _) = tokio_tungstenite::connect_async(url)
         .await
         .with_context(|| format!("connecting to {url}"))?;
-    let mut hello = None;
-    let mut buffer = PatchBuffer::default();
+    let mut viewer = Viewer::default();
     let (mut frames, mut bytes, mut first_frame) = (0u64, 0u64, None);
-    while let Some(message) = socket.next().await {
-        let data = match message.with_context(|| format!("{url}: connection failed"))? {
-            Message::Binary(data) => data,
-            Message::Close(frame) => bail!("{url}: server closed the connection: {frame:?}"),
-            _ => continue,
-        };
-        let message = ServerMessage::decode(&data)
-            .with_context(|| format!("{url}: bad message from the server"))?;
-        match (&message, hello) {
-            // Colours stay valid across a geometry change; a renderer refetches the geometry.
-            (ServerMessage::GeometryChanged { .. }, _) => continue,
-            (ServerMessage::Hello(h), None) => hello = Some(*h),
-            (ServerMessage::Hello(_), Some(_)) => bail!("{url}: a second hello"),
-            (_, None) => bail!("{url}: a frame before the hello"),
-            (_, Some(h)) => {
+    while let Some(data) = next_binary(&mut socket).await {
+        let data = data.with_context(|| url.to_string())?;
+        match viewer.receive(&data).with_context(|| url.to_string())? {
+            Step::Hello(_) | Step::GeometryChanged { .. } => {}
+            Step::NeedsFull => request_full(&mut socket).await?,
+            Step::Applied { info, .. } => {
                 frames += 1;
                 bytes += data.len() as u64;
-                match buffer.apply(&message) {
-                    Ok(()) => {}
-                    Err(ApplyError::BaseMismatch { .. }) => {
-                        socket
-                            .send(Message::Binary(ClientMessage::RequestFull.encode().into()))
-                            .await?;
-                        continue;
-                    }
-                }
-                if buffer.colours.len() != h.patch_count as usize {
-                    bail!(
-                        "{url}: frame has {} patches, hello said {}",
-                        buffer.colours.len(),
-                        h.patch_count
-                    );
-                }
                 first_frame.get_or_insert_with(|| start.elapsed());
-                if buffer.info.is_some_and(|i| i.is_final) {
+                if info.is_final {
                     let _ = socket.close(None).await;
                     return Ok(ViewerOutcome {
-                        hello: h,
-                        buffer,
+                        hello: viewer.hello().context("applied frames follow the hello")?,
+                        buffer: viewer.into_buffer(),
                         frames,
                         bytes,
                         first_frame: first_frame.unwrap_or_default(),

@@ -5,7 +5,6 @@
 
 use bytes::Bytes;
 use std::sync::Arc;
-use std::time::{SystemTime, UNIX_EPOCH};
 use tokio::sync::watch;
 use wire::{DeltaFrame, FrameInfo, FullFrame, Geometry, Hello, PROTOCOL_VERSION, ServerMessage};
 
@@ -66,14 +65,6 @@ pub struct Hub {
     geometry: std::sync::RwLock<Arc<GeometryState>>,
     /// Identifies scene content and solve settings.
     pub scene_id: u64,
-    /// Patches per frame.
-    pub patch_count: u32,
-}
-
-fn now_micros() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_micros() as u64)
 }
 
 /// Headroom a frame may leave unused before the scale is lowered: 2^8. Keeping the previous
@@ -107,7 +98,6 @@ fn encode(radiosity: &[[f32; 3]], previous_scale: Option<f32>) -> (f32, Vec<u32>
 impl Hub {
     /// A hub for `geometry`, publishing `initial` (non-final) as version 1.
     pub fn new(scene_id: u64, geometry: &Geometry, initial: &[[f32; 3]]) -> Hub {
-        let patch_count = geometry.patches.len() as u32;
         let (scale, colours) = encode(initial, None);
         let first = Self::frames(1, false, scale, colours, None, 1);
         Hub {
@@ -118,7 +108,6 @@ impl Hub {
                 geometry.clone(),
             ))),
             scene_id,
-            patch_count,
         }
     }
 
@@ -127,8 +116,9 @@ impl Hub {
         self.geometry.read().expect("geometry lock").clone()
     }
 
-    /// Replaces the geometry (the patches moved, or new leaves of a hierarchy) and returns its new version; frames
-    /// published from now on carry it, and viewers are told before their next frame.
+    /// Replaces the geometry (the patches moved, or new leaves of a hierarchy) and returns its
+    /// new version; frames published from now on carry it, and viewers are told before their
+    /// next frame.
     pub fn replace_geometry(&self, geometry: Geometry) -> u64 {
         let mut current = self.geometry.write().expect("geometry lock");
         let version = current.version + 1;
@@ -146,7 +136,7 @@ impl Hub {
     ) -> Published {
         let info = FrameInfo {
             solution_version: version,
-            sent_at_unix_micros: now_micros(),
+            sent_at_unix_micros: wire::unix_micros_now(),
             scale,
             patch_count: colours.len() as u32,
             is_final,
@@ -217,5 +207,73 @@ impl Hub {
     /// A receiver that wakes on every publish (skipping to the newest).
     pub fn subscribe(&self) -> watch::Receiver<Arc<Published>> {
         self.sender.subscribe()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn geometry(patches: usize) -> Geometry {
+        Geometry {
+            positions: vec![[0.0; 3]; 3],
+            patches: vec![[0, 1, 2, wire::geometry::NO_CORNER]; patches],
+            patch_objects: vec![0; patches],
+            objects: vec!["thing".into()],
+            camera: None,
+        }
+    }
+
+    #[test]
+    fn a_new_scale_is_the_smallest_power_of_two_that_fits_the_brightest_value() {
+        let (scale, _) = encode(&[[1000.0, 0.0, 3.0]], None);
+        assert_eq!(scale, wire::scale_for(1000.0));
+        assert_eq!(scale.log2().fract(), 0.0, "a power of two");
+        assert!(1000.0 <= wire::rgb9e5::MAX_VALUE * scale);
+        assert!(
+            1000.0 > wire::rgb9e5::MAX_VALUE * scale / 2.0,
+            "the smallest that fits"
+        );
+    }
+
+    #[test]
+    fn the_scale_is_kept_while_the_brightest_stays_within_the_headroom() {
+        let hub = Hub::new(1, &geometry(2), &[[100.0; 3], [1.0; 3]]);
+        let first = hub.current();
+        // Dimmer by 16: within the 256x headroom, so the scale stays and a delta can carry it.
+        hub.publish(&[[100.0 / 16.0; 3], [1.0; 3]], false);
+        let dimmer = hub.current();
+        assert_eq!(dimmer.scale, first.scale);
+        assert!(
+            dimmer
+                .delta
+                .as_ref()
+                .is_some_and(|(base, _)| *base == first.version)
+        );
+        // Dimmer by 1024 in all: past the headroom, a finer scale and a full frame only.
+        hub.publish(&[[100.0 / 1024.0; 3], [1.0 / 1024.0; 3]], false);
+        let dim = hub.current();
+        assert!(dim.scale < first.scale);
+        assert!(dim.delta.is_none());
+        // Brighter than the scale holds: a coarser one, never clipping.
+        hub.publish(&[[1e6; 3], [1.0; 3]], true);
+        let bright = hub.current();
+        assert!(1e6 <= wire::rgb9e5::MAX_VALUE * bright.scale);
+        // Within RGB9E5's 9-bit mantissa (EXT_texture_shared_exponent).
+        let decoded = wire::decode_colour(bright.colours[0], bright.scale)[0];
+        assert!((decoded / 1e6 - 1.0).abs() <= 2f32.powi(-9), "{decoded}");
+    }
+
+    #[test]
+    fn publishing_what_viewers_hold_makes_no_version_and_a_new_geometry_does() {
+        let hub = Hub::new(1, &geometry(1), &[[1.0; 3]]);
+        assert_eq!(hub.publish(&[[1.0; 3]], false), 1);
+        assert_eq!(hub.publish(&[[1.0; 3]], true), 2, "final is news");
+        assert_eq!(hub.replace_geometry(geometry(3)), 2);
+        // Three leaves now: a full frame of the new count on the new geometry, no delta.
+        assert_eq!(hub.publish(&[[1.0; 3]; 3], true), 3);
+        let current = hub.current();
+        assert_eq!((current.colours.len(), current.geometry_version), (3, 2));
+        assert!(current.delta.is_none());
     }
 }

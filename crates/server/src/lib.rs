@@ -53,8 +53,8 @@ pub struct Shared {
     pub limits: Limits,
     /// Cancelled on shutdown: viewers get a close frame and their tasks end.
     pub shutdown: CancellationToken,
-    /// The solve summary once it is done (JSON), for `/api/solution`.
-    pub report: std::sync::Mutex<Option<serde_json::Value>>,
+    /// The last solve's report once the first is done, for `/api/solution`.
+    pub report: std::sync::Mutex<Option<wire::summary::SolveReport>>,
     /// Edits waiting for the solver thread.
     pub edits: edits::Edits,
     /// The bearer token the control API requires.

@@ -11,9 +11,9 @@ use axum::http::HeaderMap;
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, put};
-use serde::Serialize;
 use std::net::SocketAddr;
 use std::sync::Arc;
+use wire::SolutionSummary;
 
 /// The router: `/healthz`, `/api/scene`, `/api/scene.glb`, `/api/solution`, `/ws`, `/metrics`,
 /// and the control API `PUT /api/objects/{name}/emission` and `.../transform` (bearer token).
@@ -30,10 +30,23 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .with_state(shared)
 }
 
+/// The header of `/api/scene` that names the geometry version of its body.
+pub const GEOMETRY_VERSION_HEADER: &str = "x-radcast-geometry-version";
+
 async fn scene(State(shared): State<Arc<Shared>>) -> Response {
+    let geometry = shared.hub.geometry();
     (
-        [(header::CONTENT_TYPE, "application/vnd.radcast.geometry")],
-        shared.hub.geometry().encoded.clone(),
+        [
+            (
+                header::CONTENT_TYPE,
+                "application/vnd.radcast.geometry".to_string(),
+            ),
+            (
+                header::HeaderName::from_static(GEOMETRY_VERSION_HEADER),
+                geometry.version.to_string(),
+            ),
+        ],
+        geometry.encoded.clone(),
     )
         .into_response()
 }
@@ -69,31 +82,14 @@ pub async fn serve(listener: tokio::net::TcpListener, shared: Arc<Shared>) -> st
     .await
 }
 
-/// The body of `GET /api/solution`.
-#[derive(Serialize)]
-pub struct SolutionSummary {
-    /// Scene and settings identity (hex), as in the hello.
-    pub scene_id: String,
-    /// Patches per frame.
-    pub patch_count: u32,
-    /// Current version.
-    pub solution_version: u64,
-    /// Whether the solver converged for it.
-    pub is_final: bool,
-    /// CRC-32 of the current codes as little-endian bytes (`wire::checksum`).
-    pub checksum: u32,
-    /// The frame scale.
-    pub scale: f32,
-    /// The solver's report (`radcast solve --json`'s object) once done.
-    pub report: Option<serde_json::Value>,
-}
-
-/// The current summary, for `/api/solution` and tests.
+/// The current summary, for `/api/solution` and tests: every field read from one published
+/// version, so the patch count, geometry version and checksum always agree.
 pub fn solution_summary(shared: &Shared) -> SolutionSummary {
     let current = shared.hub.current();
     SolutionSummary {
         scene_id: format!("{:016x}", shared.hub.scene_id),
-        patch_count: shared.hub.patch_count,
+        patch_count: current.colours.len() as u32,
+        geometry_version: current.geometry_version,
         solution_version: current.version,
         is_final: current.is_final,
         checksum: current.checksum,
@@ -108,9 +104,11 @@ async fn solution(State(shared): State<Arc<Shared>>) -> Response {
 
 async fn metrics(State(shared): State<Arc<Shared>>) -> Response {
     let current = shared.hub.current();
-    let text = shared
-        .metrics
-        .render(shared.hub.patch_count, current.version, current.is_final);
+    let text = shared.metrics.render(
+        current.colours.len() as u32,
+        current.version,
+        current.is_final,
+    );
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
 }
 

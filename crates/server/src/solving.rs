@@ -6,11 +6,12 @@ use anyhow::Context;
 use bincode::{Decode, Encode};
 use glam::DVec3;
 use sha2::{Digest, Sha256};
-use solver::{Mesh, Progress, Rgb, Scene, Session, SolveRequest};
+use solver::{Mesh, MoveWork, Progress, Rgb, Scene, Session, SolveRequest};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+use wire::summary::{HierarchyCounts, ObjectRadiosity, SolveReport, StageSeconds};
 use wire::{Camera, Geometry, geometry::NO_CORNER};
 
 /// A scene loaded and meshed, ready to solve.
@@ -151,18 +152,20 @@ fn cache_path(dir: &Path, scene_id: u64) -> PathBuf {
     dir.join(format!("{scene_id:016x}.radcast"))
 }
 
-fn read_cache(path: &Path, patch_count: usize) -> Option<CachedSolution> {
+/// The cached solution and its report, if the file holds one for `patch_count` patches.
+fn read_cache(path: &Path, patch_count: usize) -> Option<(CachedSolution, SolveReport)> {
     let bytes = std::fs::read(path).ok()?;
     let body = bytes.strip_prefix(CACHE_MAGIC.as_slice())?;
     let (cached, _): (CachedSolution, usize) =
         bincode::decode_from_slice(body, bincode::config::standard()).ok()?;
+    let report = serde_json::from_str(&cached.report_json).ok()?;
     (cached.radiosity.len() == patch_count
         && cached
             .radiosity
             .iter()
             .flatten()
             .all(|c| c.is_finite() && *c >= 0.0))
-    .then_some(cached)
+    .then_some((cached, report))
 }
 
 /// Writes atomically: a temporary file in the same folder, renamed over the target.
@@ -199,13 +202,12 @@ pub fn solve_and_publish(
     let cache = cache_dir
         .filter(|_| prepared.request.hierarchy.is_none())
         .map(|dir| (dir, cache_path(dir, prepared.scene_id)));
-    if let Some(cached) = cache
+    if let Some((cached, report)) = cache
         .as_ref()
         .and_then(|(_, path)| read_cache(path, prepared.mesh.patches.len()))
     {
         tracing::info!("solution read from the cache");
-        *shared.report.lock().expect("report lock") =
-            serde_json::from_str(&cached.report_json).ok();
+        *shared.report.lock().expect("report lock") = Some(report);
         hub.publish(&cached.radiosity, true);
         return Ok(Solution::Cached(cached.radiosity));
     }
@@ -241,9 +243,10 @@ pub fn solve_and_publish(
             .iter()
             .for_each(|warning| tracing::warn!("{warning}"));
     }
+    let report = report_for_viewers(&report);
     let report_json = serde_json::to_string(&report)?;
     // The report goes in before the final frame: a viewer that sees "final" may ask for it at once.
-    *shared.report.lock().expect("report lock") = serde_json::from_str(&report_json).ok();
+    *shared.report.lock().expect("report lock") = Some(report);
     hub.publish(&radiosity, true);
     if let Some((dir, path)) = cache {
         write_cache(
@@ -296,13 +299,15 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
         match session.translate(object, DVec3::from(*offset)) {
             Ok(report) => {
                 moved = true;
-                tracing::info!(
-                    object,
-                    pairs = report.pairs,
-                    entries = report.entries,
-                    ms = report.seconds * 1e3,
-                    "moved"
-                );
+                let ms = report.seconds * 1e3;
+                match report.work {
+                    MoveWork::Dense(work) => {
+                        tracing::info!(object, work.pairs, work.entries, ms, "moved")
+                    }
+                    MoveWork::Rebuilt(hierarchy) => {
+                        tracing::info!(object, hierarchy.elements, hierarchy.links, ms, "moved")
+                    }
+                }
             }
             Err(error) => tracing::warn!("move refused: {error}"),
         }
@@ -324,9 +329,7 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
         report = Some(session.solve(&solver::no_progress));
     }
     let report = report.unwrap_or_else(|| session.solve(&solver::no_progress));
-    if let Ok(json) = serde_json::to_value(&report) {
-        *shared.report.lock().expect("report lock") = Some(json);
-    }
+    *shared.report.lock().expect("report lock") = Some(report_for_viewers(&report));
     let version = shared
         .hub
         .publish(&to_f32(session.radiosity()), report.converged);
@@ -341,6 +344,48 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
     if moved {
         // Keep the lights' next edits instant on the moved scene.
         session.prepare_emitters();
+    }
+}
+
+/// The solver's report as `/api/solution` gives it.
+fn report_for_viewers(report: &solver::SolveReport) -> SolveReport {
+    let s = report.seconds;
+    SolveReport {
+        patches: report.patches,
+        triangles: report.triangles,
+        skipped_faces: report.skipped_faces,
+        method: report.method.clone(),
+        iterations: report.iterations,
+        residual: report.residual,
+        converged: report.converged,
+        tolerance: report.tolerance,
+        rays: report.rays,
+        seconds: StageSeconds {
+            load: s.load,
+            mesh: s.mesh,
+            form_factors: s.form_factors,
+            solve: s.solve,
+            total: s.total,
+        },
+        objects: report
+            .objects
+            .iter()
+            .map(|o| ObjectRadiosity {
+                name: o.name.clone(),
+                area: o.area,
+                radiosity: o.radiosity,
+            })
+            .collect(),
+        hierarchy: report.hierarchy.map(|h| HierarchyCounts {
+            elements: h.elements,
+            links: h.links,
+            clusters: h.clusters,
+            rounds: h.rounds,
+            shaft_decided: h.shaft_decided,
+            refinement_iterations: h.refinement_iterations,
+            knob_used: h.knob_used,
+            leaf_budget_reached: h.leaf_budget_reached,
+        }),
     }
 }
 

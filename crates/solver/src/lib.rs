@@ -16,6 +16,7 @@ pub mod pipeline;
 pub mod reference;
 pub mod sampling;
 pub mod scene;
+pub mod session;
 pub mod solve;
 pub mod transport;
 pub mod visibility;
@@ -25,10 +26,11 @@ pub use hierarchy::{HierarchySettings, HierarchyStats};
 pub use mesh::{Mesh, Patch, PatchTarget};
 pub use pair::FormFactorSettings;
 pub use pipeline::{
-    EditError, MethodChoice, MoveReport, Session, SolveError, SolveReport, SolveRequest, Solved,
-    solve_file, solve_mesh, solve_scene,
+    MethodChoice, SolveError, SolveReport, SolveRequest, Solved, solve_file, solve_mesh,
+    solve_scene,
 };
 pub use scene::{Material, Rgb, Scene, SceneError, View};
+pub use session::{EditError, MoveReport, MoveWork, Session};
 pub use solve::{Method, SolveOutcome, SolverSettings, System, solve};
 pub use transport::{Entries, Transport};
 

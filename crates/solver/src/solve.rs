@@ -403,3 +403,139 @@ impl Run<'_> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small non-symmetric transport, `F` stored densely with single entries.
+    struct Matrix(Vec<Vec<f64>>);
+
+    impl Transport for Matrix {
+        fn patch_count(&self) -> usize {
+            self.0.len()
+        }
+
+        fn gather(&self, radiosity: &[Rgb], out: &mut [Rgb]) {
+            for (o, row) in out.iter_mut().zip(&self.0) {
+                *o = row.iter().zip(radiosity).map(|(f, b)| *b * *f).sum();
+            }
+        }
+
+        fn entries(&self) -> Option<&dyn Entries> {
+            Some(self)
+        }
+    }
+
+    impl Entries for Matrix {
+        fn gather_row(&self, i: usize, radiosity: &[Rgb]) -> Rgb {
+            self.0[i].iter().zip(radiosity).map(|(f, b)| *b * *f).sum()
+        }
+
+        fn for_each_in_column(&self, j: usize, visit: &mut dyn FnMut(usize, f64)) {
+            (0..self.0.len()).for_each(|i| visit(i, self.0[i][j]));
+        }
+    }
+
+    /// Two patches facing each other with `F_01 = a`, `F_10 = b`: `B = (I - rho F)^-1 E` in
+    /// closed form (Cramer's rule on the 2 x 2 system).
+    #[test]
+    fn every_method_solves_a_two_patch_system_exactly() {
+        let (a, b, rho) = (0.6, 0.3, [0.9, 0.5]);
+        let transport = Matrix(vec![vec![0.0, a], vec![b, 0.0]]);
+        let emission = [Rgb::new(2.0, 1.0, 0.0), Rgb::ZERO];
+        let reflectance = rho.map(Rgb::splat);
+        let system = System {
+            reflectance: &reflectance,
+            emission: &emission,
+            area: &[1.0, 2.0],
+        };
+        let determinant = 1.0 - rho[0] * a * rho[1] * b;
+        let expected = [
+            emission[0] / determinant,
+            emission[0] * (rho[1] * b) / determinant,
+        ];
+        for method in Method::ALL {
+            let settings = SolverSettings {
+                method,
+                tolerance: 1e-12,
+                ..SolverSettings::default()
+            };
+            let outcome = solve(&transport, &system, &settings, None, &crate::no_progress)
+                .expect("a matrix has entries");
+            assert!(outcome.converged, "{method}");
+            for (got, want) in outcome.radiosity.iter().zip(&expected) {
+                assert!(
+                    (*got - *want).abs().max_element() < 1e-9,
+                    "{method}: {got} vs {want}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn gmres_is_exact_within_one_cycle_on_a_small_system_and_jacobi_takes_rho_to_the_k() {
+        // n = 3 < the restart length: GMRES's Krylov space spans the whole space in 3 steps.
+        let transport = Matrix(vec![
+            vec![0.0, 0.5, 0.4],
+            vec![0.3, 0.0, 0.6],
+            vec![0.2, 0.7, 0.0],
+        ]);
+        let reflectance = [Rgb::splat(0.9); 3];
+        let emission = [Rgb::ONE, Rgb::ZERO, Rgb::ZERO];
+        let system = System {
+            reflectance: &reflectance,
+            emission: &emission,
+            area: &[1.0; 3],
+        };
+        let run = |method| {
+            let settings = SolverSettings {
+                method,
+                tolerance: 1e-10,
+                ..SolverSettings::default()
+            };
+            solve(&transport, &system, &settings, None, &crate::no_progress).unwrap()
+        };
+        let (gmres, jacobi) = (run(Method::Gmres), run(Method::Jacobi));
+        assert!(gmres.iterations <= 3, "{}", gmres.iterations);
+        assert!(jacobi.iterations > 50, "{}", jacobi.iterations);
+        for (g, j) in gmres.radiosity.iter().zip(&jacobi.radiosity) {
+            assert!((*g - *j).abs().max_element() < 1e-8);
+        }
+    }
+
+    #[test]
+    fn no_light_is_exactly_dark_and_a_matrix_free_transport_refuses_per_patch_methods() {
+        struct Product;
+        impl Transport for Product {
+            fn patch_count(&self) -> usize {
+                1
+            }
+            fn gather(&self, _: &[Rgb], out: &mut [Rgb]) {
+                out[0] = Rgb::ZERO;
+            }
+        }
+        let system = System {
+            reflectance: &[Rgb::splat(0.5)],
+            emission: &[Rgb::ZERO],
+            area: &[1.0],
+        };
+        let dark = solve(
+            &Product,
+            &system,
+            &SolverSettings::default(),
+            None,
+            &crate::no_progress,
+        )
+        .unwrap();
+        assert_eq!((dark.radiosity[0], dark.residual), (Rgb::ZERO, 0.0));
+        let gauss_seidel = SolverSettings {
+            method: Method::GaussSeidel,
+            ..SolverSettings::default()
+        };
+        assert_eq!(
+            solve(&Product, &system, &gauss_seidel, None, &crate::no_progress).err(),
+            Some(NeedsEntries(Method::GaussSeidel))
+        );
+    }
+}

@@ -91,8 +91,9 @@ pub enum ServerMessage {
     Full(FullFrame),
     /// Changes against an earlier version.
     Delta(DeltaFrame),
-    /// The geometry changed (an object moved): fetch `/api/scene` again. Patch count and
-    /// order stay the same, so the colour buffer stays valid.
+    /// The geometry changed (an object moved): fetch `/api/scene` again. On a uniform mesh the
+    /// patches stay the same; a hierarchy's leaves change, and the next full frame carries
+    /// their new count.
     GeometryChanged {
         /// The new geometry version.
         geometry_version: u64,

@@ -4,6 +4,7 @@
 //! - [`frame`]: hello, full and delta frames, and the viewer's requests.
 //! - [`geometry`]: the scene as a viewer fetches it once.
 //! - [`PatchBuffer`]: a viewer's copy of the colours, kept current by applying frames.
+//! - [`summary`]: the JSON of `/api/solution`, typed.
 //! - [`display`]: smooth shading and the tone map every consumer shares; [`gltf`]: GLB export.
 
 pub mod display;
@@ -11,11 +12,13 @@ pub mod frame;
 pub mod geometry;
 pub mod gltf;
 pub mod rgb9e5;
+pub mod summary;
 
 pub use frame::{
     ClientMessage, DeltaFrame, FrameInfo, FullFrame, Hello, PROTOCOL_VERSION, ServerMessage,
 };
 pub use geometry::{Camera, Geometry};
+pub use summary::SolutionSummary;
 
 /// Why bytes could not be decoded. Decoders return these; they never panic.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -84,6 +87,15 @@ pub enum DecodeError {
     /// A value is out of its domain.
     #[error("invalid: {0}")]
     Invalid(String),
+}
+
+/// Microseconds since the Unix epoch by this machine's clock: what a frame's
+/// `sent_at_unix_micros` holds at publish time, and what a viewer compares it with for latency
+/// (0 if the clock is before 1970).
+pub fn unix_micros_now() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64)
 }
 
 /// CRC-32 (IEEE, as zlib's `crc32`) of the codes as little-endian bytes: the checksum

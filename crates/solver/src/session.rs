@@ -1,0 +1,596 @@
+//! A solved scene kept live for edits: emission changes by superposition, moves by updating
+//! only the form factors they can change (or rebuilding a hierarchy).
+
+use crate::form_factors::{DenseFormFactors, UpdateStats};
+use crate::hierarchy::{Hierarchy, HierarchyStats, Refined};
+use crate::mesh::Mesh;
+use crate::pipeline::{ObjectRadiosity, SolveError, SolveReport, SolveRequest, StageSeconds};
+use crate::scene::{Rgb, Scene};
+use crate::solve::{NeedsEntries, SolveOutcome, System, solve};
+use crate::transport::Transport;
+use crate::visibility::Occluders;
+use crate::{Progress, no_progress};
+use glam::DVec3;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// How a session moves light between patches.
+enum Transfer {
+    Dense(DenseFormFactors),
+    Hierarchy(Box<Hierarchy>),
+}
+
+impl Transfer {
+    fn transport(&self) -> &dyn Transport {
+        match self {
+            Transfer::Dense(factors) => factors,
+            Transfer::Hierarchy(hierarchy) => hierarchy.as_ref(),
+        }
+    }
+}
+
+/// A solved scene kept live for emission changes. Radiosity is linear in emission,
+/// `B = (I - rho F)^-1 E`, so the session keeps, per edited object `k`, its response `G_k` to
+/// unit emission on its patches and `R_k` to its original emission; after edits,
+/// `B = B_base + sum_k (e_k * G_k - R_k)`: an O(n) sum per edit instead of a solve, exact to
+/// the solver tolerance. Each object costs one or two solves, once.
+pub struct Session {
+    scene: Scene,
+    pub(crate) mesh: Mesh,
+    transfer: Transfer,
+    /// The solution for the scene's own emission.
+    base: Vec<Rgb>,
+    /// Per edited object, its responses.
+    responses: BTreeMap<u32, Response>,
+    /// Current emission of every edited object.
+    edited: BTreeMap<u32, Rgb>,
+    objects: Vec<String>,
+    patch_objects: Vec<u32>,
+    reflectance: Vec<Rgb>,
+    emission: Vec<Rgb>,
+    area: Vec<f64>,
+    request: SolveRequest,
+    pub(crate) seconds: StageSeconds,
+    triangles: usize,
+    skipped_faces: usize,
+    pub(crate) radiosity: Vec<Rgb>,
+}
+
+/// What one object's emission does to every patch, W/m^2 per patch.
+struct Response {
+    /// `G_k`: the radiosity its patches emitting one W/m^2 (each channel) give.
+    unit: Vec<Rgb>,
+    /// `R_k`: the radiosity its emission as loaded gives.
+    original: Vec<Rgb>,
+}
+
+/// An emission change that cannot be applied.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EditError {
+    /// No object has that name.
+    #[error("no object named '{0}'")]
+    UnknownObject(String),
+    /// Emission must be finite and non-negative.
+    #[error("emission {0:?} must have every channel finite and >= 0")]
+    InvalidEmission([f64; 3]),
+    /// A translation must be finite.
+    #[error("translation {0:?} must be finite")]
+    InvalidTranslation([f64; 3]),
+}
+
+/// What moving an object cost.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MoveReport {
+    /// What was recomputed.
+    pub work: MoveWork,
+    /// Seconds for the form-factor update or the rebuild.
+    pub seconds: f64,
+}
+
+/// What a move recomputed, by path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MoveWork {
+    /// The dense matrix: only the pairs the move can affect.
+    Dense(UpdateStats),
+    /// A hierarchy, built again (new leaves and links).
+    Rebuilt(HierarchyStats),
+}
+
+impl Session {
+    /// Computes the form factors of `mesh`; nothing is solved yet.
+    pub fn new(
+        scene: &Scene,
+        mesh: &Mesh,
+        request: &SolveRequest,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<Session, SolveError> {
+        let n = mesh.patches.len();
+        let bytes = DenseFormFactors::memory_bytes(n);
+        if bytes > request.max_matrix_bytes {
+            let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
+            return Err(SolveError::TooLarge {
+                patches: n,
+                gib: gib(bytes),
+                limit_gib: gib(request.max_matrix_bytes),
+            });
+        }
+        let mut seconds = StageSeconds::default();
+        let clock = Instant::now();
+        let occluders = Occluders::new(scene);
+        seconds.mesh = clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let form_factors =
+            DenseFormFactors::compute(mesh, &occluders, &request.form_factors, progress);
+        seconds.form_factors = clock.elapsed().as_secs_f64();
+        Ok(Session::assemble(
+            scene.clone(),
+            mesh.clone(),
+            Transfer::Dense(form_factors),
+            request,
+            seconds,
+            vec![Rgb::ZERO; n],
+        ))
+    }
+
+    /// Builds the element and link hierarchy of `scene` with `request.hierarchy`'s settings (the
+    /// defaults if it names none), which also decides the patches: the leaves.
+    /// [`Session::solve`] then finishes from the refinement's last solution.
+    pub fn hierarchical(
+        scene: &Scene,
+        request: &SolveRequest,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<Session, SolveError> {
+        let settings = request.hierarchy.unwrap_or_default();
+        let request = &SolveRequest {
+            hierarchy: Some(settings),
+            ..*request
+        };
+        if request.solver.method.needs_entries() {
+            return Err(NeedsEntries(request.solver.method).into());
+        }
+        let mut seconds = StageSeconds::default();
+        let clock = Instant::now();
+        let occluders = Occluders::new(scene);
+        seconds.mesh = clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let Refined {
+            hierarchy,
+            radiosity,
+        } = Hierarchy::build(
+            scene,
+            &occluders,
+            &settings,
+            request.form_factors,
+            &request.solver,
+            progress,
+        )?;
+        seconds.form_factors = clock.elapsed().as_secs_f64();
+        let mesh = hierarchy.leaf_mesh();
+        Ok(Session::assemble(
+            scene.clone(),
+            mesh,
+            Transfer::Hierarchy(Box::new(hierarchy)),
+            request,
+            seconds,
+            radiosity,
+        ))
+    }
+
+    fn assemble(
+        scene: Scene,
+        mesh: Mesh,
+        transfer: Transfer,
+        request: &SolveRequest,
+        seconds: StageSeconds,
+        radiosity: Vec<Rgb>,
+    ) -> Session {
+        let column =
+            |f: fn(&crate::mesh::Patch) -> Rgb| mesh.patches.iter().map(f).collect::<Vec<_>>();
+        Session {
+            objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
+            patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
+            reflectance: column(|p| p.reflectance),
+            emission: column(|p| p.emission),
+            area: mesh.patches.iter().map(|p| p.area).collect(),
+            request: *request,
+            base: radiosity.clone(),
+            responses: BTreeMap::new(),
+            edited: BTreeMap::new(),
+            seconds,
+            triangles: scene.triangle_count(),
+            skipped_faces: scene.skipped_degenerate_faces,
+            radiosity,
+            scene,
+            mesh,
+            transfer,
+        }
+    }
+
+    /// The scene as it is now (after moves).
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The patches as they are now (after moves).
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
+    }
+
+    /// The hierarchy's statistics, for a hierarchical session.
+    fn hierarchy_stats(&self) -> Option<HierarchyStats> {
+        match &self.transfer {
+            Transfer::Dense(_) => None,
+            Transfer::Hierarchy(hierarchy) => Some(hierarchy.stats()),
+        }
+    }
+
+    fn object_index(&self, name: &str) -> Result<u32, EditError> {
+        self.objects
+            .iter()
+            .position(|o| o == name)
+            .map(|i| i as u32)
+            .ok_or_else(|| EditError::UnknownObject(name.into()))
+    }
+
+    /// Moves object `name` by `offset`, recomputing only the form factors it can affect. The
+    /// next [`Session::solve`] solves the moved scene in full (with the current emission).
+    pub fn translate(&mut self, name: &str, offset: DVec3) -> Result<MoveReport, EditError> {
+        let object = self.object_index(name)?;
+        if !offset.is_finite() {
+            return Err(EditError::InvalidTranslation(offset.to_array()));
+        }
+        let clock = Instant::now();
+        // The responses were for the old transport: fold the edits into the emission (of the
+        // patches, and of the scene, which a hierarchy is rebuilt from) and let the next solve
+        // start over from it.
+        for (object, emission) in std::mem::take(&mut self.edited) {
+            for (e, _) in self
+                .emission
+                .iter_mut()
+                .zip(&self.patch_objects)
+                .filter(|(_, o)| **o == object)
+            {
+                *e = emission;
+            }
+            self.scene
+                .faces
+                .iter_mut()
+                .filter(|f| f.object == object)
+                .for_each(|f| f.emission = emission);
+        }
+        self.responses.clear();
+        let corners = |scene: &Scene| {
+            scene
+                .faces
+                .iter()
+                .filter(|f| f.object == object)
+                .flat_map(|f| f.polygon.corners().to_vec())
+                .collect::<Vec<_>>()
+        };
+        let mut swept = corners(&self.scene);
+        self.scene.translate_object(object, offset);
+        swept.extend(corners(&self.scene));
+        match &mut self.transfer {
+            Transfer::Dense(form_factors) => {
+                let occluders = Occluders::new(&self.scene);
+                self.mesh.translate_object(object, offset);
+                let moved: Vec<bool> = self.patch_objects.iter().map(|o| *o == object).collect();
+                let stats = form_factors.update_moved(
+                    &self.mesh,
+                    &occluders,
+                    &moved,
+                    crate::geometry::bounds(swept),
+                );
+                Ok(MoveReport {
+                    work: MoveWork::Dense(stats),
+                    seconds: clock.elapsed().as_secs_f64(),
+                })
+            }
+            Transfer::Hierarchy(_) => {
+                // Refinement depends on where light falls, so the hierarchy is built again: new
+                // leaves, which viewers get as a new geometry.
+                let seconds = self.seconds;
+                *self = Session::hierarchical(&self.scene, &self.request, &no_progress)
+                    .expect("this session's method already ran on a hierarchy");
+                self.seconds = seconds;
+                let stats = self.hierarchy_stats().expect("a hierarchical session");
+                Ok(MoveReport {
+                    work: MoveWork::Rebuilt(stats),
+                    seconds: clock.elapsed().as_secs_f64(),
+                })
+            }
+        }
+    }
+
+    /// Radiosity per patch, W/m^2: zero until the first [`Session::solve`].
+    pub fn radiosity(&self) -> &[Rgb] {
+        &self.radiosity
+    }
+
+    /// Takes `radiosity` as the solution for the scene's own emission (a cached solve), so that
+    /// edits can be applied without solving it again.
+    pub fn adopt_solution(&mut self, radiosity: Vec<Rgb>) {
+        assert_eq!(radiosity.len(), self.base.len(), "one radiosity per patch");
+        self.base.clone_from(&radiosity);
+        self.radiosity = radiosity;
+    }
+
+    /// Sets the emission of every patch of object `name`; [`Session::solve`] applies it.
+    pub fn set_emission(&mut self, name: &str, emission: Rgb) -> Result<(), EditError> {
+        let object = self.object_index(name)?;
+        if !emission.is_finite() || emission.min_element() < 0.0 {
+            return Err(EditError::InvalidEmission(emission.to_array()));
+        }
+        self.edited.insert(object, emission);
+        Ok(())
+    }
+
+    /// Solves for `emission` from `initial` (or zero).
+    fn solve_for(
+        &self,
+        emission: &[Rgb],
+        initial: Option<&[Rgb]>,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> SolveOutcome {
+        let system = System {
+            reflectance: &self.reflectance,
+            emission,
+            area: &self.area,
+        };
+        // Both constructors refuse a method the transport cannot run.
+        solve(
+            self.transfer.transport(),
+            &system,
+            &self.request.solver,
+            initial,
+            progress,
+        )
+        .expect("method checked when the session was made")
+    }
+
+    /// Computes the responses of `object` unless known; returns the solver iterations spent.
+    fn ensure_response(&mut self, object: u32) -> usize {
+        if self.responses.contains_key(&object) {
+            return 0;
+        }
+        let mask = |value: &dyn Fn(usize) -> Rgb| -> Vec<Rgb> {
+            (0..self.emission.len())
+                .map(|i| {
+                    if self.patch_objects[i] == object {
+                        value(i)
+                    } else {
+                        Rgb::ZERO
+                    }
+                })
+                .collect()
+        };
+        let unit = self.solve_for(&mask(&|_| Rgb::ONE), None, &no_progress);
+        let original_emission = mask(&|i| self.emission[i]);
+        let mut iterations = unit.iterations;
+        // Uniform original emission needs no second solve: its response is e * G.
+        let first = original_emission
+            .iter()
+            .zip(&self.patch_objects)
+            .find(|(_, o)| **o == object)
+            .map(|(e, _)| *e)
+            .unwrap_or(Rgb::ZERO);
+        let uniform = original_emission
+            .iter()
+            .zip(&self.patch_objects)
+            .all(|(e, o)| *o != object || *e == first);
+        let original = if uniform {
+            unit.radiosity.iter().map(|g| *g * first).collect()
+        } else {
+            let solved = self.solve_for(&original_emission, None, &no_progress);
+            iterations += solved.iterations;
+            solved.radiosity
+        };
+        self.responses.insert(
+            object,
+            Response {
+                unit: unit.radiosity,
+                original,
+            },
+        );
+        iterations
+    }
+
+    /// Prepares the responses of every object that emits in the scene, so that edits of the
+    /// scene's lights apply at once. Returns the solver iterations spent.
+    pub fn prepare_emitters(&mut self) -> usize {
+        let emitting: std::collections::BTreeSet<u32> = self
+            .emission
+            .iter()
+            .zip(&self.patch_objects)
+            .filter(|(e, _)| e.max_element() > 0.0)
+            .map(|(_, o)| *o)
+            .collect();
+        emitting.into_iter().map(|o| self.ensure_response(o)).sum()
+    }
+
+    /// Solves: the first time (or with no edits) from zero, afterwards by superposing the
+    /// responses of the edited objects on the base solution.
+    pub fn solve(&mut self, progress: &(dyn Fn(Progress) + Sync)) -> SolveReport {
+        let clock = Instant::now();
+        let (iterations, residual, converged) = if self.edited.is_empty() {
+            // From the current answer: after a move, most of it still holds.
+            let outcome = self.solve_for(&self.emission, Some(&self.radiosity), progress);
+            self.base.clone_from(&outcome.radiosity);
+            self.radiosity = outcome.radiosity;
+            (outcome.iterations, outcome.residual, outcome.converged)
+        } else {
+            let edited: Vec<(u32, Rgb)> = self.edited.iter().map(|(o, e)| (*o, *e)).collect();
+            let iterations = edited.iter().map(|(o, _)| self.ensure_response(*o)).sum();
+            let mut radiosity = self.base.clone();
+            for (object, emission) in edited {
+                let response = &self.responses[&object];
+                for ((b, g), r) in radiosity
+                    .iter_mut()
+                    .zip(&response.unit)
+                    .zip(&response.original)
+                {
+                    *b += *g * emission - *r;
+                }
+            }
+            // Clamp round-off below zero, as the solver does.
+            radiosity.iter_mut().for_each(|b| *b = b.max(Rgb::ZERO));
+            self.radiosity = radiosity;
+            (iterations, self.request.solver.tolerance, true)
+        };
+        self.seconds.solve = clock.elapsed().as_secs_f64();
+        self.seconds.total = self.seconds.mesh + self.seconds.form_factors + self.seconds.solve;
+        let (mut area, mut power) = (
+            vec![0.0; self.objects.len()],
+            vec![Rgb::ZERO; self.objects.len()],
+        );
+        for ((o, a), b) in self
+            .patch_objects
+            .iter()
+            .zip(&self.area)
+            .zip(&self.radiosity)
+        {
+            area[*o as usize] += a;
+            power[*o as usize] += *b * *a;
+        }
+        SolveReport {
+            patches: self.radiosity.len(),
+            triangles: self.triangles,
+            skipped_faces: self.skipped_faces,
+            method: if self.request.hierarchy.is_some() {
+                "hierarchical".into()
+            } else {
+                self.request.solver.method.name().into()
+            },
+            iterations,
+            residual,
+            converged,
+            tolerance: self.request.solver.tolerance,
+            rays: match &self.transfer {
+                Transfer::Dense(factors) => factors.rays_cast,
+                Transfer::Hierarchy(hierarchy) => hierarchy.stats().rays,
+            },
+            seconds: self.seconds,
+            objects: self
+                .objects
+                .iter()
+                .zip(area.iter().zip(&power))
+                .map(|(name, (a, p))| ObjectRadiosity {
+                    name: name.clone(),
+                    area: *a,
+                    radiosity: if *a > 0.0 {
+                        (*p / *a).to_array()
+                    } else {
+                        [0.0; 3]
+                    },
+                })
+                .collect(),
+            hierarchy: self.hierarchy_stats(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::PatchTarget;
+    use crate::scene::Material;
+
+    /// A closed unit cube whose floor and ceiling are separate lamps.
+    fn two_lamp_box() -> Scene {
+        let mut scene = Scene::default();
+        let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
+        for (name, origin, u, v, emission) in [
+            ("floor", DVec3::ZERO, z, x, Rgb::new(1.0, 0.5, 0.0)),
+            ("ceiling", y, x, z, Rgb::new(0.0, 2.0, 1.0)),
+            ("wall", DVec3::ZERO, y, z, Rgb::ZERO),
+            ("wall", x, z, y, Rgb::ZERO),
+            ("wall", DVec3::ZERO, x, y, Rgb::ZERO),
+            ("wall", z, y, x, Rgb::ZERO),
+        ] {
+            let object = match scene.objects.iter().position(|o| o.name == name) {
+                Some(index) => index as u32,
+                None => scene.add_object(name),
+            };
+            let material = Material {
+                reflectance: Rgb::splat(0.6),
+                emission,
+            };
+            scene.add_polygon(
+                object,
+                &[origin, origin + u, origin + u + v, origin + v],
+                material,
+            );
+        }
+        scene
+    }
+
+    fn session(scene: &Scene) -> Session {
+        let request = SolveRequest {
+            patches: PatchTarget::Count(96),
+            ..SolveRequest::default()
+        };
+        let mesh = Mesh::build(scene, request.patches);
+        Session::new(scene, &mesh, &request, &no_progress).expect("a small dense matrix")
+    }
+
+    #[test]
+    fn an_edit_by_superposition_equals_a_solve_of_the_edited_scene() {
+        let scene = two_lamp_box();
+        let mut live = session(&scene);
+        live.solve(&no_progress);
+        let (floor, ceiling) = (Rgb::new(3.0, 0.0, 1.0), Rgb::ZERO);
+        live.set_emission("floor", floor).unwrap();
+        live.set_emission("ceiling", ceiling).unwrap();
+        let report = live.solve(&no_progress);
+        let mut edited = scene.clone();
+        for face in &mut edited.faces {
+            match scene.objects[face.object as usize].name.as_str() {
+                "floor" => face.emission = floor,
+                "ceiling" => face.emission = ceiling,
+                _ => {}
+            }
+        }
+        let mut fresh = session(&edited);
+        fresh.solve(&no_progress);
+        let worst = live
+            .radiosity()
+            .iter()
+            .zip(fresh.radiosity())
+            .map(|(a, b)| (*a - *b).abs().max_element())
+            .fold(0.0, f64::max);
+        // Each response is solved to the tolerance (relative 1e-6); B ~ 10 here.
+        assert!(worst < 1e-4, "worst difference {worst}");
+        assert!(report.converged);
+        // The floor at (3, 0, 1) and an unlit ceiling: no green left, up to the tolerance of the
+        // responses that cancelled it.
+        assert!(live.radiosity().iter().all(|b| b.y < 1e-5));
+    }
+
+    #[test]
+    fn bad_edits_are_refused_and_change_nothing() {
+        let scene = two_lamp_box();
+        let mut live = session(&scene);
+        live.solve(&no_progress);
+        let before = live.radiosity().to_vec();
+        assert_eq!(
+            live.set_emission("lamp", Rgb::ONE),
+            Err(EditError::UnknownObject("lamp".into()))
+        );
+        for bad in [
+            Rgb::new(1.0, f64::NAN, 0.0),
+            Rgb::splat(-1.0),
+            Rgb::splat(f64::INFINITY),
+        ] {
+            assert!(matches!(
+                live.set_emission("floor", bad),
+                Err(EditError::InvalidEmission(_))
+            ));
+        }
+        assert!(matches!(
+            live.translate("floor", DVec3::new(0.0, f64::NAN, 0.0)),
+            Err(EditError::InvalidTranslation(_))
+        ));
+        live.solve(&no_progress);
+        assert_eq!(live.radiosity(), &before[..]);
+    }
+}

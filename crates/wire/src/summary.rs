@@ -1,0 +1,103 @@
+//! The JSON of `GET /api/solution`: what a viewer checks its buffer against, and the solver's
+//! report. Typed here so that the server writes and every client reads one definition
+//! (docs/PROTOCOL.md gives the same fields).
+
+use serde::{Deserialize, Serialize};
+
+/// The body of `GET /api/solution`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SolutionSummary {
+    /// Scene content and solve settings, as 16 lower-case hex digits (the hello's `scene_id`).
+    pub scene_id: String,
+    /// Patches of the current geometry: every frame of this version has this many codes.
+    pub patch_count: u32,
+    /// The geometry these colours belong to (the hello's and `/api/scene`'s version).
+    pub geometry_version: u64,
+    /// The current solution version.
+    pub solution_version: u64,
+    /// Whether the solver converged for it.
+    pub is_final: bool,
+    /// [`crate::checksum`] of the current codes.
+    pub checksum: u32,
+    /// The current frame scale, W/m^2 per decoded unit (a power of two, as an f32).
+    pub scale: f32,
+    /// The solver's report once the first solve is done (`null` before).
+    pub report: Option<SolveReport>,
+}
+
+/// What the last solve did.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SolveReport {
+    /// Patches solved for (the leaves, for the hierarchical method).
+    pub patches: usize,
+    /// Triangles of the input scene (a quad counts two).
+    pub triangles: usize,
+    /// Input faces dropped for zero area.
+    pub skipped_faces: usize,
+    /// The method: `jacobi`, `gauss-seidel`, `progressive`, `gmres` or `hierarchical`.
+    pub method: String,
+    /// Solver iterations.
+    pub iterations: usize,
+    /// Final relative residual.
+    pub residual: f64,
+    /// Whether the residual reached the tolerance.
+    pub converged: bool,
+    /// The tolerance asked for.
+    pub tolerance: f64,
+    /// Shadow rays cast.
+    pub rays: u64,
+    /// Wall-clock seconds per stage.
+    pub seconds: StageSeconds,
+    /// Per object of the scene, in file order.
+    pub objects: Vec<ObjectRadiosity>,
+    /// Elements and links, for the hierarchical method (absent otherwise).
+    #[serde(flatten, default, skip_serializing_if = "Option::is_none")]
+    pub hierarchy: Option<HierarchyCounts>,
+}
+
+/// Wall-clock seconds per stage of a solve.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageSeconds {
+    /// Reading the scene file.
+    pub load: f64,
+    /// Meshing and building the ray-casting index.
+    pub mesh: f64,
+    /// Form factors, or the hierarchy's refinement.
+    pub form_factors: f64,
+    /// The linear solve.
+    pub solve: f64,
+    /// All of the above.
+    pub total: f64,
+}
+
+/// One object's share of the answer.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectRadiosity {
+    /// The object's name from the scene file.
+    pub name: String,
+    /// Its area, scene units squared.
+    pub area: f64,
+    /// Its area-weighted mean radiosity, W/m^2 per channel.
+    pub radiosity: [f64; 3],
+}
+
+/// What the hierarchical method built.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HierarchyCounts {
+    /// Leaf elements (= patches).
+    pub elements: usize,
+    /// Links kept.
+    pub links: usize,
+    /// Cluster nodes above the input faces.
+    pub clusters: usize,
+    /// Refinement-and-solve rounds run.
+    pub rounds: usize,
+    /// Links whose visibility a shaft decided without rays.
+    pub shaft_decided: u64,
+    /// Solver iterations spent in the refinement rounds.
+    pub refinement_iterations: usize,
+    /// The error knob refined to (coarser than asked when the leaf budget forced it).
+    pub knob_used: f64,
+    /// Whether refinement stopped at the leaf budget.
+    pub leaf_budget_reached: bool,
+}
