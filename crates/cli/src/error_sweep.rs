@@ -50,11 +50,6 @@ pub fn load_reference(scene: &Path) -> anyhow::Result<Reference> {
         .with_context(|| format!("{}: not a radcast reference", path.display()))
 }
 
-fn median(mut values: Vec<f64>) -> f64 {
-    values.sort_by(f64::total_cmp);
-    values[values.len() / 2]
-}
-
 /// Runs the sweep and writes `<out_dir>/<name>.{md,svg}`: dense GMRES at each count and ray
 /// setting, the other solvers at the middle count, and the hierarchical path at each knob.
 pub fn run(
@@ -110,7 +105,7 @@ pub fn run(
                 peak_bytes = peak_bytes.max(crate::HEAP.peak_usage());
             }
             let stage = |f: fn(&solver::SolveReport) -> f64| {
-                median(runs.iter().map(|r| f(&r.report)).collect())
+                crate::median(runs.iter().map(|r| f(&r.report)).collect())
             };
             let (mesh, ff, solve) = (
                 stage(|r| r.seconds.mesh),

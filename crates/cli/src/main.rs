@@ -383,7 +383,9 @@ fn print_summary(scene: &std::path::Path, r: &SolveReport) {
     }
 }
 
-fn median(values: &mut [f64]) -> f64 {
+/// The median of repeated timings (the upper one of an even count): these machines are
+/// noisy, so tables report medians.
+fn median(mut values: Vec<f64>) -> f64 {
     values.sort_by(f64::total_cmp);
     values[values.len() / 2]
 }
@@ -421,8 +423,7 @@ fn bench(
         for _ in 0..repeat {
             runs.push(solve_file(scene, &request, &solver::no_progress)?.report);
         }
-        let stage =
-            |f: fn(&SolveReport) -> f64| median(&mut runs.iter().map(f).collect::<Vec<_>>());
+        let stage = |f: fn(&SolveReport) -> f64| median(runs.iter().map(f).collect());
         let (load, mesh, ff, solve, total) = (
             stage(|r| r.seconds.load),
             stage(|r| r.seconds.mesh),

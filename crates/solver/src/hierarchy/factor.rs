@@ -265,3 +265,54 @@ fn integration_level(p: &Patch, q: &Patch, mean: f64, spread: f64) -> u32 {
     let near = near_pair_level(p, q).unwrap_or(1);
     if spread > mean { near.max(3) } else { near }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hierarchy::Hierarchy;
+    use crate::scene::{Material, Rgb, Scene};
+    use glam::dvec3;
+
+    /// Unit squares at z = 0 (facing +z) and z = `height` (facing -z), `shift` apart in x.
+    fn facing_squares(height: f64, shift: f64) -> Hierarchy {
+        let mut scene = Scene::default();
+        let material = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ONE,
+        };
+        let square = |x: f64, z: f64, up: bool| {
+            let c = [
+                dvec3(x, 0.0, z),
+                dvec3(x + 1.0, 0.0, z),
+                dvec3(x + 1.0, 1.0, z),
+                dvec3(x, 1.0, z),
+            ];
+            if up { c } else { [c[0], c[3], c[2], c[1]] }
+        };
+        for (x, z, up) in [(0.0, 0.0, true), (shift, height, false)] {
+            let object = scene.add_object("square");
+            scene.add_polygon(object, &square(x, z, up), material);
+        }
+        Hierarchy::cluster_tree(&scene)
+    }
+
+    #[test]
+    fn the_transfer_centre_is_the_source_centroid_for_an_aligned_pair_and_leans_when_shifted() {
+        let aligned = facing_squares(1.0, 0.0);
+        let (p, q) = (
+            aligned.element_patch(aligned.face_node[0]),
+            aligned.element_patch(aligned.face_node[1]),
+        );
+        let centre = kernel_centre(p, q, 1);
+        // Symmetric up to the sample pattern: within a few per cent of the half-width.
+        assert!(centre.distance(q.centroid) < 0.05, "{centre}");
+        assert_eq!(tangent_coordinates(q, q.centroid), [0.0, 0.0]);
+        // Shifted by +x, the part of the source nearest the receiver (its -x side) weighs most.
+        let shifted = facing_squares(0.5, 1.0);
+        let (p, q) = (
+            shifted.element_patch(shifted.face_node[0]),
+            shifted.element_patch(shifted.face_node[1]),
+        );
+        assert!(kernel_centre(p, q, 1).x < q.centroid.x - 0.05);
+    }
+}
