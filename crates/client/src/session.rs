@@ -37,14 +37,14 @@ pub async fn watch_until_final(url: &str, limit: Duration) -> anyhow::Result<Vie
 /// fails or the server closes it.
 pub async fn next_binary(socket: &mut Socket) -> Option<anyhow::Result<Bytes>> {
     while let Some(message) = socket.next().await {
-        return Some(match message {
-            Ok(Message::Binary(data)) => Ok(data),
+        match message {
+            Ok(Message::Binary(data)) => return Some(Ok(data)),
             Ok(Message::Close(frame)) => {
-                Err(anyhow!("the server closed the connection: {frame:?}"))
+                return Some(Err(anyhow!("the server closed the connection: {frame:?}")));
             }
-            Ok(_) => continue,
-            Err(error) => Err(anyhow!("connection failed: {error}")),
-        });
+            Ok(_) => {}
+            Err(error) => return Some(Err(anyhow!("connection failed: {error}"))),
+        }
     }
     None
 }

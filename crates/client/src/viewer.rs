@@ -65,7 +65,7 @@ impl Viewer {
     /// Decodes and applies one binary message from the server.
     pub fn receive(&mut self, bytes: &[u8]) -> Result<Step, ProtocolError> {
         let message = ServerMessage::decode(bytes)?;
-        match (&message, self.hello) {
+        let (full, info, changed) = match (&message, self.hello) {
             (ServerMessage::Hello(hello), None) => {
                 self.hello = Some(*hello);
                 self.geometry_version = hello.geometry_version;
@@ -74,18 +74,14 @@ impl Viewer {
             }
             (ServerMessage::Hello(_), Some(_)) => return Err(ProtocolError::SecondHello),
             (_, None) => return Err(ProtocolError::BeforeHello),
-            (_, Some(_)) => {}
-        }
-        let (full, info, changed) = match &message {
-            ServerMessage::GeometryChanged { geometry_version } => {
+            (ServerMessage::GeometryChanged { geometry_version }, Some(_)) => {
                 self.geometry_version = *geometry_version;
                 self.expected_patches = None;
                 return Ok(Step::GeometryChanged {
                     geometry_version: *geometry_version,
                 });
             }
-            ServerMessage::Hello(_) => unreachable!("handled above"),
-            ServerMessage::Full(frame) => {
+            (ServerMessage::Full(frame), Some(_)) => {
                 let changed = if self.buffer.colours.len() == frame.colours.len() {
                     wire::changes(&self.buffer.colours, &frame.colours).0.len()
                 } else {
@@ -93,7 +89,7 @@ impl Viewer {
                 };
                 (true, frame.info, changed)
             }
-            ServerMessage::Delta(frame) => (false, frame.info, frame.indices.len()),
+            (ServerMessage::Delta(frame), Some(_)) => (false, frame.info, frame.indices.len()),
         };
         let expected = self.expected_patches.unwrap_or(info.patch_count);
         if info.patch_count != expected {

@@ -270,6 +270,7 @@ fn integration_level(p: &Patch, q: &Patch, mean: f64, spread: f64) -> u32 {
 mod tests {
     use super::*;
     use crate::hierarchy::Hierarchy;
+    use crate::hierarchy::fixtures::add_parallelogram;
     use crate::scene::{Material, Rgb, Scene};
     use glam::dvec3;
 
@@ -280,18 +281,11 @@ mod tests {
             reflectance: Rgb::splat(0.5),
             emission: Rgb::ONE,
         };
-        let square = |x: f64, z: f64, up: bool| {
-            let c = [
-                dvec3(x, 0.0, z),
-                dvec3(x + 1.0, 0.0, z),
-                dvec3(x + 1.0, 1.0, z),
-                dvec3(x, 1.0, z),
-            ];
-            if up { c } else { [c[0], c[3], c[2], c[1]] }
-        };
-        for (x, z, up) in [(0.0, 0.0, true), (shift, height, false)] {
-            let object = scene.add_object("square");
-            scene.add_polygon(object, &square(x, z, up), material);
+        for (x, z, u, v) in [
+            (0.0, 0.0, DVec3::X, DVec3::Y),
+            (shift, height, DVec3::Y, DVec3::X),
+        ] {
+            add_parallelogram(&mut scene, "square", (dvec3(x, 0.0, z), u, v), material);
         }
         Hierarchy::cluster_tree(&scene)
     }

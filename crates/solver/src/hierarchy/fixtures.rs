@@ -7,6 +7,7 @@ use crate::solve::SolverSettings;
 use crate::visibility::Occluders;
 use glam::{DVec3, dvec3};
 
+/// A closed unit cube, faces inwards, every face emitting 1 with reflectance 0.5.
 pub(super) fn closed_cube() -> Scene {
     let mut scene = Scene::default();
     let material = Material {
@@ -22,16 +23,12 @@ pub(super) fn closed_cube() -> Scene {
         (DVec3::ZERO, x, y),
         (z, y, x),
     ] {
-        let object = scene.add_object("wall");
-        scene.add_polygon(
-            object,
-            &[origin, origin + u, origin + u + v, origin + v],
-            material,
-        );
+        add_parallelogram(&mut scene, "wall", (origin, u, v), material);
     }
     scene
 }
 
+/// The hierarchy of `scene` built at error knob `error`, other settings at their defaults.
 pub(super) fn build(scene: &Scene, error: f64) -> Hierarchy {
     let occluders = Occluders::new(scene);
     let settings = HierarchySettings {
@@ -63,34 +60,48 @@ pub(super) fn room_with_a_box() -> Scene {
         emission: Rgb::ONE,
     };
     let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
-    let mut add = |name: &str, origin: DVec3, u: DVec3, v: DVec3, material: Material| {
-        let object = scene.add_object(name);
-        scene.add_polygon(
-            object,
-            &[origin, origin + u, origin + u + v, origin + v],
-            material,
-        );
-    };
     let s = 4.0;
-    add("floor", DVec3::ZERO, z * s, x * s, grey);
-    add("ceiling", y * s, x * s, z * s, lamp);
-    for (origin, u, v) in [
+    add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z * s, x * s), grey);
+    add_parallelogram(&mut scene, "ceiling", (y * s, x * s, z * s), lamp);
+    for sides in [
         (DVec3::ZERO, y * s, z * s),
         (x * s, z * s, y * s),
         (DVec3::ZERO, x * s, y * s),
         (z * s, y * s, x * s),
     ] {
-        add("wall", origin, u, v, grey);
+        add_parallelogram(&mut scene, "wall", sides, grey);
     }
-    let o = dvec3(1.0, 0.0, 1.0);
-    for (origin, u, v) in [
+    for sides in unit_box(dvec3(1.0, 0.0, 1.0)) {
+        add_parallelogram(&mut scene, "box", sides, grey);
+    }
+    scene
+}
+
+/// Adds an object `name` with one face: the parallelogram at `origin` spanned by `u` then `v`
+/// (its front faces along `u x v`).
+pub(super) fn add_parallelogram(
+    scene: &mut Scene,
+    name: &str,
+    (origin, u, v): (DVec3, DVec3, DVec3),
+    material: Material,
+) {
+    let object = scene.add_object(name);
+    scene.add_polygon(
+        object,
+        &[origin, origin + u, origin + u + v, origin + v],
+        material,
+    );
+}
+
+/// The top and four sides of a unit box standing at `corner` (its least x, y, z), facing
+/// out, as (origin, u, v) for [`add_parallelogram`]: closed against a floor it stands on.
+pub(super) fn unit_box(corner: DVec3) -> [(DVec3, DVec3, DVec3); 5] {
+    let (x, y, z, o) = (DVec3::X, DVec3::Y, DVec3::Z, corner);
+    [
         (o + y, z, x),
         (o, z, y),
         (o + x, y, z),
         (o, y, x),
         (o + z, x, y),
-    ] {
-        add("box", origin, u, v, grey);
-    }
-    scene
+    ]
 }

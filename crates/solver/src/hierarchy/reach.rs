@@ -54,9 +54,7 @@ impl Hierarchy {
             self.seen_area[n] += reached;
         }
     }
-}
 
-impl Hierarchy {
     /// Mean over the reached area of the leaves of the largest channel of reflected radiosity
     /// (`B - E`): the scale errors are measured against, which a small bright lamp does not
     /// inflate.

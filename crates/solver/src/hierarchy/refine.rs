@@ -83,10 +83,8 @@ pub(super) struct Refiner<'a> {
     pub(super) occluders: &'a Occluders,
     pub(super) rays: FormFactorSettings,
     sources: &'a NodeRadiosity,
-    /// Largest radiosity error a link may carry, W/m^2.
-    tolerance: f64,
-    /// Smallest element radius as a fraction of its face's.
-    smallest: f64,
+    /// How fine to refine (no element splits once the leaf budget froze them).
+    target: RefineTarget,
     pub(super) rays_cast: AtomicU64,
     pub(super) shaft_decided: AtomicU64,
 }
@@ -120,7 +118,7 @@ impl Refiner<'_> {
             return Decision::Drop;
         }
         let errors = LinkErrors::new(r, self.sources.at(source), estimate.factor, estimate.spread);
-        match errors.end_to_split(r, s, self.tolerance, self.smallest) {
+        match errors.end_to_split(r, s, self.target.tolerance, self.target.smallest) {
             Some(End::Receiver) => return Decision::SplitReceiver,
             Some(End::Source) => return Decision::SplitSource,
             None => {}
@@ -173,8 +171,10 @@ impl Hierarchy {
                     occluders,
                     rays,
                     sources: &sources,
-                    tolerance: target.tolerance,
-                    smallest: smallest_while(frozen, target.smallest),
+                    target: RefineTarget {
+                        tolerance: target.tolerance,
+                        smallest: smallest_while(frozen, target.smallest),
+                    },
                     rays_cast: AtomicU64::new(0),
                     shaft_decided: AtomicU64::new(0),
                 };
@@ -400,7 +400,7 @@ fn smallest_while(frozen: bool, smallest: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::hierarchy::MIN_RADIUS_PER_ERROR;
-    use crate::hierarchy::fixtures::build;
+    use crate::hierarchy::fixtures::{add_parallelogram, build, unit_box};
     use crate::scene::{Material, Scene};
     use glam::{DVec3, dvec3};
 
@@ -412,30 +412,15 @@ mod tests {
             reflectance: Rgb::splat(0.5),
             emission: Rgb::ZERO,
         };
-        let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
-        let mut add = |origin: DVec3, u: DVec3, v: DVec3, material: Material| {
-            let object = scene.add_object("part");
-            scene.add_polygon(
-                object,
-                &[origin, origin + u, origin + u + v, origin + v],
-                material,
-            );
-        };
-        add(DVec3::ZERO, z * 20.0, x * 20.0, grey);
-        let o = dvec3(9.5, 0.0, 9.5);
-        for (origin, u, v) in [
-            (o + y, z, x),
-            (o, z, y),
-            (o + x, y, z),
-            (o, y, x),
-            (o + z, x, y),
-        ] {
-            add(origin, u, v, grey);
+        let (x, z) = (DVec3::X, DVec3::Z);
+        add_parallelogram(&mut scene, "part", (DVec3::ZERO, z * 20.0, x * 20.0), grey);
+        for sides in unit_box(dvec3(9.5, 0.0, 9.5)) {
+            add_parallelogram(&mut scene, "part", sides, grey);
         }
-        add(
-            dvec3(11.0, 3.0, 9.5),
-            x,
-            z,
+        add_parallelogram(
+            &mut scene,
+            "part",
+            (dvec3(11.0, 3.0, 9.5), x, z),
             Material {
                 reflectance: Rgb::ZERO,
                 emission: Rgb::splat(10.0),
