@@ -132,14 +132,26 @@ fn a_solve_with_exact_probes_has_no_error_and_a_wrong_one_does() {
             standard_error: [0.0; 3],
         })
         .collect();
-    let error = evaluate(&dark_floor, &solved.mesh, &solved.radiosity, &exact);
+    let error = evaluate(
+        &dark_floor,
+        &solved.mesh,
+        &solved.radiosity,
+        &solved.vertex_radiosity,
+        &exact,
+    );
     assert!(error.probes > 0 && error.probes < 50);
     assert!(
         error.smooth.rms < 1e-6 && error.flat.rms < 1e-6 && error.smooth.energy.abs() < 1e-6,
         "{error:?}"
     );
-    let halved: Vec<Rgb> = solved.radiosity.iter().map(|b| *b * 0.5).collect();
-    let error = evaluate(&dark_floor, &solved.mesh, &halved, &exact);
+    let halve = |values: &[Rgb]| values.iter().map(|b| *b * 0.5).collect::<Vec<_>>();
+    let error = evaluate(
+        &dark_floor,
+        &solved.mesh,
+        &halve(&solved.radiosity),
+        &halve(&solved.vertex_radiosity),
+        &exact,
+    );
     assert!(
         (error.flat.rms - 0.5).abs() < 1e-6 && (error.smooth.energy + 0.5).abs() < 1e-6,
         "{error:?}"

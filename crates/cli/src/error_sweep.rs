@@ -113,7 +113,13 @@ pub fn run(
                 stage(|r| r.seconds.solve),
             );
             let last = runs.last().context("one run")?;
-            let error = evaluate(&last.scene, &last.mesh, &last.radiosity, &reference.probes);
+            let error = evaluate(
+                &last.scene,
+                &last.mesh,
+                &last.radiosity,
+                &last.vertex_radiosity,
+                &reference.probes,
+            );
             let (method, links) = match (&request.hierarchy, &last.report.hierarchy) {
                 (Some(settings), Some(stats)) => (
                     format!("hierarchical E={}", settings.error),

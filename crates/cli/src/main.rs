@@ -167,8 +167,15 @@ fn main() -> anyhow::Result<()> {
                 })
                 .transpose()?;
             let solved = solve_file(&scene, &request, &|p| printer.report(p))?;
-            let measured = reference
-                .map(|r| evaluate(&solved.scene, &solved.mesh, &solved.radiosity, &r.probes));
+            let measured = reference.map(|r| {
+                evaluate(
+                    &solved.scene,
+                    &solved.mesh,
+                    &solved.radiosity,
+                    &solved.vertex_radiosity,
+                    &r.probes,
+                )
+            });
             let report = &solved.report;
             if report.skipped_faces > 0 {
                 eprintln!(

@@ -1,8 +1,8 @@
 //! Error of a solution at probe points, against a reference or an exact answer.
 //!
 //! Two readings of a solution are measured: **flat** (the value of the patch holding the probe)
-//! and **smooth** (what viewers show: corner values as area-weighted means of the patches around
-//! each corner, interpolated over the patch's fan triangles, as `wire::display` does).
+//! and **smooth** (what viewers show: the corner values they are sent, interpolated over the
+//! patch's fan triangles, as `wire::display` does).
 //! Only probes on non-emitting faces count: an emitter's own emission is exact and would
 //! swamp the comparison.
 
@@ -136,9 +136,15 @@ fn stats(pairs: &[(Rgb, Rgb)]) -> ErrorStats {
     }
 }
 
-/// Measures `radiosity` on `mesh` (built from `scene`) at the probes.
-pub fn evaluate(scene: &Scene, mesh: &Mesh, radiosity: &[Rgb], probes: &[Probe]) -> SolutionError {
-    let corners = corner_radiosity(mesh, radiosity);
+/// Measures a solution on `mesh` (built from `scene`) at the probes: `radiosity` per patch for
+/// the flat reading, `corners` per mesh corner (what viewers are sent) for the smooth one.
+pub fn evaluate(
+    scene: &Scene,
+    mesh: &Mesh,
+    radiosity: &[Rgb],
+    corners: &[Rgb],
+    probes: &[Probe],
+) -> SolutionError {
     let faces = face_ranges(mesh, scene.faces.len());
     let counted: Vec<&Probe> = probes
         .iter()
@@ -152,7 +158,7 @@ pub fn evaluate(scene: &Scene, mesh: &Mesh, radiosity: &[Rgb], probes: &[Probe])
     let (mut flat, mut smooth) = (Vec::new(), Vec::new());
     for probe in &counted {
         let reference = Rgb::from(probe.radiosity);
-        let located = locate(mesh, &corners, &faces, probe);
+        let located = locate(mesh, corners, &faces, probe);
         flat.push((radiosity[located.patch], reference));
         smooth.push((located.smooth, reference));
     }

@@ -184,6 +184,8 @@ pub struct Solved {
     pub mesh: Mesh,
     /// Radiosity per patch, W/m^2.
     pub radiosity: Vec<Rgb>,
+    /// Radiosity per mesh corner, W/m^2: what viewers are sent ([`Session::vertex_radiosity`]).
+    pub vertex_radiosity: Vec<Rgb>,
     /// The summary.
     pub report: SolveReport,
 }
@@ -223,6 +225,7 @@ pub fn solve_scene(
     let report = session.solve(progress);
     Ok(Solved {
         scene,
+        vertex_radiosity: session.vertex_radiosity(),
         mesh: session.mesh,
         radiosity: session.radiosity,
         report,
@@ -230,7 +233,8 @@ pub fn solve_scene(
 }
 
 /// Form factors and solve for a mesh already built from `scene` (the server meshes first so
-/// that viewers get the geometry while it solves). `seconds.mesh` holds the BVH build only.
+/// that viewers get the geometry while it solves). Returns the radiosity per mesh corner (what
+/// viewers are sent) and the report; `seconds.mesh` holds the BVH build only.
 pub fn solve_mesh(
     scene: &Scene,
     mesh: &Mesh,
@@ -239,5 +243,5 @@ pub fn solve_mesh(
 ) -> Result<(Vec<Rgb>, SolveReport), SolveError> {
     let mut session = Session::new(scene, mesh, request, progress)?;
     let report = session.solve(progress);
-    Ok((session.radiosity, report))
+    Ok((session.vertex_radiosity(), report))
 }

@@ -2,6 +2,7 @@
 //! only the form factors they can change (or rebuilding a hierarchy).
 
 use crate::form_factors::{DenseFormFactors, UpdateStats};
+use crate::gather::CornerLight;
 use crate::hierarchy::{Hierarchy, HierarchyStats, Refined};
 use crate::mesh::Mesh;
 use crate::pipeline::{ObjectRadiosity, SolveError, SolveReport, SolveRequest, StageSeconds};
@@ -38,6 +39,8 @@ pub struct Session {
     scene: Scene,
     pub(crate) mesh: Mesh,
     transfer: Transfer,
+    /// Direct light at the mesh corners, for the values viewers are sent.
+    corner_light: CornerLight,
     /// The solution for the scene's own emission.
     base: Vec<Rgb>,
     /// Per edited object, its responses.
@@ -126,6 +129,7 @@ impl Session {
             scene.clone(),
             mesh.clone(),
             Transfer::Dense(form_factors),
+            &occluders,
             request,
             seconds,
             vec![Rgb::ZERO; n],
@@ -170,6 +174,7 @@ impl Session {
             scene.clone(),
             mesh,
             Transfer::Hierarchy(Box::new(hierarchy)),
+            &occluders,
             request,
             seconds,
             radiosity,
@@ -180,12 +185,17 @@ impl Session {
         scene: Scene,
         mesh: Mesh,
         transfer: Transfer,
+        occluders: &Occluders,
         request: &SolveRequest,
         seconds: StageSeconds,
         radiosity: Vec<Rgb>,
     ) -> Session {
         let column =
             |f: fn(&crate::mesh::Patch) -> Rgb| mesh.patches.iter().map(f).collect::<Vec<_>>();
+        let clock = Instant::now();
+        let corner_light = CornerLight::new(&scene, &mesh, occluders);
+        let mut seconds = seconds;
+        seconds.form_factors += clock.elapsed().as_secs_f64();
         Session {
             objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
             patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
@@ -200,6 +210,7 @@ impl Session {
             triangles: scene.triangle_count(),
             skipped_faces: scene.skipped_degenerate_faces,
             radiosity,
+            corner_light,
             scene,
             mesh,
             transfer,
@@ -281,6 +292,7 @@ impl Session {
                     &moved,
                     crate::geometry::bounds(swept),
                 );
+                self.corner_light = CornerLight::new(&self.scene, &self.mesh, &occluders);
                 Ok(MoveReport {
                     work: MoveWork::Dense(stats),
                     seconds: clock.elapsed().as_secs_f64(),
@@ -305,6 +317,18 @@ impl Session {
     /// Radiosity per patch, W/m^2: zero until the first [`Session::solve`].
     pub fn radiosity(&self) -> &[Rgb] {
         &self.radiosity
+    }
+
+    /// Radiosity at every mesh corner, W/m^2: what viewers are sent and interpolate
+    /// ([`CornerLight::corner_radiosity`]: direct light gathered at the corner, indirect light
+    /// from the patches around it).
+    pub fn vertex_radiosity(&self) -> Vec<Rgb> {
+        self.corner_light.corner_radiosity(
+            &self.mesh,
+            self.transfer.transport(),
+            &self.radiosity,
+            &self.emission,
+        )
     }
 
     /// Takes `radiosity` as the solution for the scene's own emission (a cached solve), so that

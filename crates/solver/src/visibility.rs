@@ -99,6 +99,9 @@ fn ray_direction(direction: DVec3) -> Vec3A {
 /// surface never shadows itself; relative, so scale does not matter.
 const SEGMENT_END_MARGIN: f32 = 1e-5;
 
+/// Cosine-distributed rays per point for the buried test ([`Occluders::is_buried`]).
+const BURIED_RAYS: u32 = 8;
+
 /// Rays a receiver casts over its hemisphere to decide whether its view is closed.
 const CLOSURE_RAYS: u32 = 64;
 
@@ -217,6 +220,20 @@ impl Occluders {
                 p.face,
             )
             .is_some_and(|hit| hit.front)
+        })
+    }
+
+    /// Whether point `x` of face `face` (front normal `normal`) is buried: every one of
+    /// [`BURIED_RAYS`] cosine-distributed rays from it meets the back of a face, as under a box
+    /// standing on the floor or inside a wall that cuts through it. Visibility is symmetric, so
+    /// nothing sees a buried point. One ray that escapes or meets a front face shows the point
+    /// reachable, so a one-sided face seen from behind buries only the points it covers in
+    /// every direction.
+    pub fn is_buried(&self, x: DVec3, normal: DVec3, face: u32, seed: u64) -> bool {
+        (0..BURIED_RAYS).all(|k| {
+            let (u, v) = stratified_uv(k, seed);
+            self.closest_hit(x, cosine_direction(normal, u, v), face)
+                .is_some_and(|hit| !hit.front)
         })
     }
 

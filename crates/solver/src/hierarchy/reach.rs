@@ -3,15 +3,10 @@
 //! errors are measured against the mean over it.
 
 use super::Hierarchy;
-use crate::mesh::Patch;
-use crate::sampling::{cosine_direction, pair_seed, stratified_uv};
+use crate::sampling::pair_seed;
 use crate::scene::Rgb;
 use crate::visibility::Occluders;
-use glam::DVec3;
 use rayon::prelude::*;
-
-/// Cosine-distributed rays per point for the buried test ([`is_buried`]).
-const BURIED_RAYS: u32 = 8;
 
 impl Hierarchy {
     /// Measures the leaves not measured yet and sums the reached area up the trees.
@@ -31,7 +26,12 @@ impl Hierarchy {
                 let mut point = 0;
                 patch.polygon.for_each_quadrature_point(1, |x, weight| {
                     point += 1;
-                    if !is_buried(x, patch, occluders, pair_seed(n as usize, point)) {
+                    if !occluders.is_buried(
+                        x,
+                        patch.normal,
+                        patch.face,
+                        pair_seed(n as usize, point),
+                    ) {
                         share += weight;
                     }
                 });
@@ -72,20 +72,6 @@ impl Hierarchy {
             });
         if area > 0.0 { sum / area } else { 0.0 }
     }
-}
-
-/// Whether point `x` of `patch` is buried: every one of [`BURIED_RAYS`] cosine-distributed rays
-/// from it meets the back of a face, as under a box standing on the floor or inside a wall that
-/// cuts through it. Visibility is symmetric, so nothing sees a buried point. One ray that
-/// escapes or meets a front face shows the point reachable, so a one-sided face seen from
-/// behind buries only the points it covers in every direction.
-fn is_buried(x: DVec3, patch: &Patch, occluders: &Occluders, seed: u64) -> bool {
-    (0..BURIED_RAYS).all(|k| {
-        let (u, v) = stratified_uv(k, seed);
-        occluders
-            .closest_hit(x, cosine_direction(patch.normal, u, v), patch.face)
-            .is_some_and(|hit| !hit.front)
-    })
 }
 
 #[cfg(test)]
