@@ -10,7 +10,7 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 use tokio_tungstenite::tungstenite::Message;
-use wire::{ClientMessage, Geometry, PatchBuffer, ServerMessage};
+use wire::{ClientMessage, ColourBuffer, Geometry, ServerMessage};
 
 /// The control token of test servers.
 const TOKEN: &str = "test-token";
@@ -43,16 +43,21 @@ async fn cornell_server(limits: Limits) -> (SocketAddr, Arc<Shared>) {
     (address, shared)
 }
 
-/// A server over a synthetic geometry of `patches` triangles, for tests that publish by hand.
-async fn synthetic_server(patches: u32, limits: Limits) -> (SocketAddr, Arc<Shared>) {
+/// A server over a synthetic geometry of `vertices` vertices on a line, triangles over each
+/// three in turn, for tests that publish by hand.
+async fn synthetic_server(vertices: u32, limits: Limits) -> (SocketAddr, Arc<Shared>) {
     let geometry = Geometry {
-        positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-        patches: vec![[0, 1, 2, wire::geometry::NO_CORNER]; patches as usize],
-        patch_objects: vec![0; patches as usize],
-        objects: vec!["plate".into()],
+        positions: (0..vertices)
+            .map(|i| [i as f32, (i % 2) as f32, 0.0])
+            .collect(),
+        patches: (0..vertices.saturating_sub(2))
+            .map(|i| [i, i + 1, i + 2, wire::geometry::NO_CORNER])
+            .collect(),
+        patch_objects: vec![0; vertices.saturating_sub(2) as usize],
+        objects: vec!["strip".into()],
         camera: None,
     };
-    let hub = Hub::new(7, &geometry, &vec![[0.0; 3]; patches as usize]);
+    let hub = Hub::new(7, &geometry, &vec![[0.0; 3]; vertices as usize]);
     let shared = Arc::new(Shared {
         hub: Arc::new(hub),
         metrics: Default::default(),
@@ -67,8 +72,8 @@ async fn synthetic_server(patches: u32, limits: Limits) -> (SocketAddr, Arc<Shar
 }
 
 /// Deterministic noise radiosity, different for every `seed`, so frames do not compress.
-fn noise(patches: u32, seed: u64) -> Vec<[f32; 3]> {
-    (0..patches as u64)
+fn noise(vertices: u32, seed: u64) -> Vec<[f32; 3]> {
+    (0..vertices as u64)
         .map(|i| {
             let x = (i
                 .wrapping_mul(6_364_136_223_846_793_005)
@@ -105,8 +110,8 @@ async fn next_message(socket: &mut Socket) -> ServerMessage {
 }
 
 /// Reads frames until the buffer holds `version` (or a final frame when `None`).
-async fn follow(socket: &mut Socket, until: Option<u64>) -> PatchBuffer {
-    let mut buffer = PatchBuffer::default();
+async fn follow(socket: &mut Socket, until: Option<u64>) -> ColourBuffer {
+    let mut buffer = ColourBuffer::default();
     assert!(matches!(
         next_message(socket).await,
         ServerMessage::Hello(_)
@@ -170,8 +175,8 @@ async fn several_viewers_end_with_the_servers_buffer() {
     assert_eq!(json["scale"].as_f64(), Some(summary.scale as f64));
     assert_eq!(json["scene_id"].as_str().map(str::len), Some(16));
     assert_eq!(
-        json["patch_count"].as_u64(),
-        Some(summary.patch_count as u64)
+        json["vertex_count"].as_u64(),
+        Some(summary.vertex_count as u64)
     );
     assert_eq!(json["geometry_version"].as_u64(), Some(1));
     assert_eq!(json["report"]["method"], "gmres");
@@ -193,7 +198,7 @@ async fn a_late_joiner_gets_the_current_state_at_once() {
     let ServerMessage::Hello(hello) = next_message(&mut socket).await else {
         panic!("hello first")
     };
-    assert_eq!((hello.patch_count, hello.scene_id), (100, 7));
+    assert_eq!((hello.vertex_count, hello.scene_id), (100, 7));
     // The very next message is the whole current state, final.
     let ServerMessage::Full(frame) = next_message(&mut socket).await else {
         panic!("a full frame second")
@@ -209,7 +214,7 @@ async fn a_late_joiner_gets_the_current_state_at_once() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn later_versions_arrive_as_deltas_of_only_the_changed_patches() {
+async fn later_versions_arrive_as_deltas_of_only_the_changed_vertices() {
     let (address, shared) = synthetic_server(1000, Limits::default()).await;
     let mut base = vec![[1.0f32; 3]; 1000];
     base[0] = [5.0, 5.0, 5.0];
@@ -239,14 +244,14 @@ async fn a_stalled_viewer_neither_delays_others_nor_holds_memory() {
         send_timeout: Duration::from_millis(300),
         ..Limits::default()
     };
-    let patches = 50_000; // 200 KB frames: socket buffers fill after a few dozen
-    let (address, shared) = synthetic_server(patches, limits).await;
+    let vertices = 50_000; // 200 KB frames: socket buffers fill after a few dozen
+    let (address, shared) = synthetic_server(vertices, limits).await;
     // The stalled viewer completes the handshake and then never reads.
     let _stalled = connect(address).await;
     let mut healthy = connect(address).await;
     let mut buffer = follow(&mut healthy, Some(1)).await;
     for seed in 0..300 {
-        let last = shared.hub.publish(&noise(patches, seed), seed == 299);
+        let last = shared.hub.publish(&noise(vertices, seed), seed == 299);
         // The healthy viewer keeps up with every publish while the stalled one blocks.
         while buffer.info.unwrap().solution_version < last {
             let message = next_message(&mut healthy).await;

@@ -43,7 +43,7 @@ enum Command {
         #[arg(long, default_value_t = 600.0)]
         timeout: f64,
     },
-    /// Stay connected and print every update (version, patches changed, bytes, latency).
+    /// Stay connected and print every update (version, vertices changed, bytes, latency).
     Watch {
         /// The server's stream.
         #[arg(long, default_value = "ws://127.0.0.1:8080/ws")]
@@ -329,8 +329,8 @@ async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> any
         let (full, changed, info) = match viewer.receive(&data)? {
             Step::Hello(hello) => {
                 println!(
-                    "hello: scene {:016x}, {} patches, protocol {}",
-                    hello.scene_id, hello.patch_count, hello.protocol_version
+                    "hello: scene {:016x}, {} vertices, protocol {}",
+                    hello.scene_id, hello.vertex_count, hello.protocol_version
                 );
                 continue;
             }
@@ -354,7 +354,7 @@ async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> any
         let latency_ms =
             wire::unix_micros_now().saturating_sub(info.sent_at_unix_micros) as f64 / 1e3;
         println!(
-            "version {}: {}, {changed} patches changed, {} bytes, latency {latency_ms:.1} ms{}",
+            "version {}: {}, {changed} vertices changed, {} bytes, latency {latency_ms:.1} ms{}",
             info.solution_version,
             if full { "full" } else { "delta" },
             data.len(),
@@ -423,11 +423,11 @@ async fn view(
     };
     let mut mismatched = 0;
     for (v, outcome) in outcomes.iter().enumerate() {
-        if outcome.buffer.colours.len() != geometry.patches.len() {
+        if outcome.buffer.colours.len() != geometry.positions.len() {
             bail!(
-                "viewer {v}: {} patches, but the geometry has {}",
+                "viewer {v}: {} colours, but the geometry has {} vertices",
                 outcome.buffer.colours.len(),
-                geometry.patches.len()
+                geometry.positions.len()
             );
         }
         let checksum = wire::checksum(&outcome.buffer.colours);

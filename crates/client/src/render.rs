@@ -1,11 +1,11 @@
-//! A small software rasterizer: z-buffered triangles with radiosity interpolated smoothly from
-//! patches to their corners, tone-mapped to 8-bit sRGB as [`wire::display`] documents.
+//! A small software rasterizer: z-buffered triangles with the vertices' radiosity interpolated
+//! smoothly, tone-mapped to 8-bit sRGB as [`wire::display`] documents.
 
 use anyhow::{Context, bail};
 use glam::Vec3;
 use std::path::Path;
-use wire::display::{corner_radiosity, corners, exposure, srgb_byte, tone_map};
-use wire::{Geometry, PatchBuffer};
+use wire::display::{corners, exposure, srgb_byte, tone_map};
+use wire::{ColourBuffer, Geometry};
 
 /// A pinhole camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -119,16 +119,13 @@ impl Image {
 /// Renders the patches from `view`; both sides of every face are drawn.
 pub fn render(
     geometry: &Geometry,
-    buffer: &PatchBuffer,
+    buffer: &ColourBuffer,
     view: &View,
     width: u32,
     height: u32,
 ) -> Image {
     let radiosity = buffer.radiosity();
-    let colours: Vec<Vec3> = corner_radiosity(geometry, &radiosity)
-        .into_iter()
-        .map(Vec3::from)
-        .collect();
+    let colours: Vec<Vec3> = radiosity.iter().map(|&rgb| Vec3::from(rgb)).collect();
     let k = exposure(geometry, &radiosity);
     let camera = Camera::new(view, geometry, width, height);
     let mut inverse_depth = vec![0.0f32; (width * height) as usize];

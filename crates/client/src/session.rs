@@ -5,7 +5,7 @@ use anyhow::{Context, anyhow, bail};
 use futures_util::{SinkExt, StreamExt};
 use std::time::{Duration, Instant};
 use tokio_tungstenite::tungstenite::{Bytes, Message};
-use wire::{ClientMessage, Hello, PatchBuffer};
+use wire::{ClientMessage, ColourBuffer, Hello};
 
 /// A viewer's WebSocket.
 pub type Socket =
@@ -17,7 +17,7 @@ pub struct ViewerOutcome {
     /// The server's hello.
     pub hello: Hello,
     /// The colours at the end.
-    pub buffer: PatchBuffer,
+    pub buffer: ColourBuffer,
     /// Frames received (full and delta).
     pub frames: u64,
     /// Bytes of frames received.

@@ -2,7 +2,7 @@
 //! the server's binary messages and acts on what it says, so they all follow the protocol the
 //! same way (docs/PROTOCOL.md, "Viewer state machine").
 
-use wire::{ApplyError, FrameInfo, Hello, PatchBuffer, ServerMessage};
+use wire::{ApplyError, ColourBuffer, FrameInfo, Hello, ServerMessage};
 
 /// A viewer: the hello, the geometry version it belongs to, and the colours held.
 #[derive(Debug, Default)]
@@ -11,14 +11,14 @@ pub struct Viewer {
     geometry_version: u64,
     /// Patches every frame must have: the hello's, until a geometry change makes the next full
     /// frame say (a hierarchy's move changes its leaves).
-    expected_patches: Option<u32>,
-    buffer: PatchBuffer,
+    expected_vertices: Option<u32>,
+    buffer: ColourBuffer,
 }
 
 /// What one message did.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Step {
-    /// The hello: the scene, its geometry version and patch count.
+    /// The hello: the scene, its geometry version and vertex count.
     Hello(Hello),
     /// The geometry changed: fetch `/api/scene` again before rendering the next colours.
     GeometryChanged {
@@ -51,8 +51,8 @@ pub enum ProtocolError {
     /// A hello after the first.
     #[error("a second hello")]
     SecondHello,
-    /// A frame whose patch count is not the geometry's.
-    #[error("a frame of {got} patches for a geometry of {expected}")]
+    /// A frame whose vertex count is not the geometry's.
+    #[error("a frame of {got} vertices for a geometry of {expected}")]
     PatchCount {
         /// Patches in the geometry.
         expected: u32,
@@ -69,14 +69,14 @@ impl Viewer {
             (ServerMessage::Hello(hello), None) => {
                 self.hello = Some(*hello);
                 self.geometry_version = hello.geometry_version;
-                self.expected_patches = Some(hello.patch_count);
+                self.expected_vertices = Some(hello.vertex_count);
                 return Ok(Step::Hello(*hello));
             }
             (ServerMessage::Hello(_), Some(_)) => return Err(ProtocolError::SecondHello),
             (_, None) => return Err(ProtocolError::BeforeHello),
             (ServerMessage::GeometryChanged { geometry_version }, Some(_)) => {
                 self.geometry_version = *geometry_version;
-                self.expected_patches = None;
+                self.expected_vertices = None;
                 return Ok(Step::GeometryChanged {
                     geometry_version: *geometry_version,
                 });
@@ -91,11 +91,11 @@ impl Viewer {
             }
             (ServerMessage::Delta(frame), Some(_)) => (false, frame.info, frame.indices.len()),
         };
-        let expected = self.expected_patches.unwrap_or(info.patch_count);
-        if info.patch_count != expected {
+        let expected = self.expected_vertices.unwrap_or(info.vertex_count);
+        if info.vertex_count != expected {
             return Err(ProtocolError::PatchCount {
                 expected,
-                got: info.patch_count,
+                got: info.vertex_count,
             });
         }
         match self.buffer.apply(&message) {
@@ -103,7 +103,7 @@ impl Viewer {
             Err(ApplyError::BaseMismatch { .. }) => return Ok(Step::NeedsFull),
         }
         if full {
-            self.expected_patches = Some(info.patch_count);
+            self.expected_vertices = Some(info.vertex_count);
         }
         Ok(Step::Applied {
             full,
@@ -123,12 +123,12 @@ impl Viewer {
     }
 
     /// The colours held.
-    pub fn buffer(&self) -> &PatchBuffer {
+    pub fn buffer(&self) -> &ColourBuffer {
         &self.buffer
     }
 
     /// The colours held, taken out.
-    pub fn into_buffer(self) -> PatchBuffer {
+    pub fn into_buffer(self) -> ColourBuffer {
         self.buffer
     }
 }
@@ -138,22 +138,22 @@ mod tests {
     use super::*;
     use wire::{DeltaFrame, FullFrame};
 
-    fn hello(patch_count: u32) -> Vec<u8> {
+    fn hello(vertex_count: u32) -> Vec<u8> {
         ServerMessage::Hello(Hello {
             protocol_version: wire::PROTOCOL_VERSION,
             scene_id: 7,
             geometry_version: 1,
-            patch_count,
+            vertex_count,
         })
         .encode()
     }
 
-    fn info(version: u64, patch_count: u32, is_final: bool) -> FrameInfo {
+    fn info(version: u64, vertex_count: u32, is_final: bool) -> FrameInfo {
         FrameInfo {
             solution_version: version,
             sent_at_unix_micros: 0,
             scale: 1.0,
-            patch_count,
+            vertex_count,
             is_final,
         }
     }
@@ -166,10 +166,10 @@ mod tests {
         .encode()
     }
 
-    fn delta(base: u64, version: u64, patch_count: u32, changes: &[(u32, u32)]) -> Vec<u8> {
+    fn delta(base: u64, version: u64, vertex_count: u32, changes: &[(u32, u32)]) -> Vec<u8> {
         ServerMessage::Delta(DeltaFrame {
             base_version: base,
-            info: info(version, patch_count, true),
+            info: info(version, vertex_count, true),
             indices: changes.iter().map(|c| c.0).collect(),
             colours: changes.iter().map(|c| c.1).collect(),
         })
@@ -237,7 +237,7 @@ mod tests {
     }
 
     #[test]
-    fn a_geometry_change_lets_the_next_full_frame_set_the_patch_count() {
+    fn a_geometry_change_lets_the_next_full_frame_set_the_vertex_count() {
         let mut viewer = Viewer::default();
         viewer.receive(&hello(2)).unwrap();
         viewer.receive(&full(1, vec![1, 2])).unwrap();

@@ -48,7 +48,7 @@ impl GeometryState {
             protocol_version: PROTOCOL_VERSION,
             scene_id,
             geometry_version: version,
-            patch_count: geometry.patches.len() as u32,
+            vertex_count: geometry.positions.len() as u32,
         };
         GeometryState {
             version,
@@ -138,10 +138,10 @@ impl Hub {
             solution_version: version,
             sent_at_unix_micros: wire::unix_micros_now(),
             scale,
-            patch_count: colours.len() as u32,
+            vertex_count: colours.len() as u32,
             is_final,
         };
-        // A delta needs the same scale and the same patches (a hierarchy's leaves change on a move).
+        // A delta needs the same scale and the same vertices (a hierarchy's leaves change on a move).
         let delta = previous
             .filter(|p| p.scale == scale && p.colours.len() == colours.len())
             .map(|p| {
@@ -214,11 +214,11 @@ impl Hub {
 mod tests {
     use super::*;
 
-    fn geometry(patches: usize) -> Geometry {
+    fn geometry(vertices: usize) -> Geometry {
         Geometry {
-            positions: vec![[0.0; 3]; 3],
-            patches: vec![[0, 1, 2, wire::geometry::NO_CORNER]; patches],
-            patch_objects: vec![0; patches],
+            positions: vec![[0.0; 3]; vertices],
+            patches: vec![[0, 0, 0, wire::geometry::NO_CORNER]],
+            patch_objects: vec![0],
             objects: vec!["thing".into()],
             camera: None,
         }
@@ -270,7 +270,7 @@ mod tests {
         assert_eq!(hub.publish(&[[1.0; 3]], false), 1);
         assert_eq!(hub.publish(&[[1.0; 3]], true), 2, "final is news");
         assert_eq!(hub.replace_geometry(geometry(3)), 2);
-        // Three leaves now: a full frame of the new count on the new geometry, no delta.
+        // Three vertices now: a full frame of the new count on the new geometry, no delta.
         assert_eq!(hub.publish(&[[1.0; 3]; 3], true), 3);
         let current = hub.current();
         assert_eq!((current.colours.len(), current.geometry_version), (3, 2));

@@ -67,7 +67,7 @@ impl Metrics {
     }
 
     /// The text served at `/metrics`.
-    pub fn render(&self, patches: u32, solution_version: u64, is_final: bool) -> String {
+    pub fn render(&self, vertices: u32, solution_version: u64, is_final: bool) -> String {
         let mut out = String::new();
         let mut metric = |name: &str, kind: &str, help: &str, samples: &[(String, f64)]| {
             let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} {kind}");
@@ -136,10 +136,10 @@ impl Metrics {
             &plain(get(&self.full_resyncs)),
         );
         metric(
-            "radcast_patches",
+            "radcast_vertices",
             "gauge",
-            "Patches per frame.",
-            &plain(patches as u64),
+            "Colours per frame: the geometry's vertices.",
+            &plain(vertices as u64),
         );
         metric(
             "radcast_solution_version",

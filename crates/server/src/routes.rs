@@ -83,12 +83,12 @@ pub async fn serve(listener: tokio::net::TcpListener, shared: Arc<Shared>) -> st
 }
 
 /// The current summary, for `/api/solution` and tests: every field read from one published
-/// version, so the patch count, geometry version and checksum always agree.
+/// version, so the vertex count, geometry version and checksum always agree.
 pub fn solution_summary(shared: &Shared) -> SolutionSummary {
     let current = shared.hub.current();
     SolutionSummary {
         scene_id: format!("{:016x}", shared.hub.scene_id),
-        patch_count: current.colours.len() as u32,
+        vertex_count: current.colours.len() as u32,
         geometry_version: current.geometry_version,
         solution_version: current.version,
         is_final: current.is_final,

@@ -119,16 +119,10 @@ fn to_f32(radiosity: &[Rgb]) -> Vec<[f32; 3]> {
     radiosity.iter().map(|b| b.as_vec3().to_array()).collect()
 }
 
-/// The state viewers see before the solve: every patch at its own emission.
+/// The state viewers see before the solve: every vertex at its face's emission.
 pub fn emission_only(prepared: &Prepared) -> Vec<[f32; 3]> {
-    to_f32(
-        &prepared
-            .mesh
-            .patches
-            .iter()
-            .map(|p| p.emission)
-            .collect::<Vec<_>>(),
-    )
+    let mesh = &prepared.mesh;
+    to_f32(&mesh.corner_means(&mesh.patches.iter().map(|p| p.emission).collect::<Vec<_>>()))
 }
 
 /// Creates the hub for `prepared`, publishing its emission-only state.
@@ -142,27 +136,32 @@ pub fn hub_for(prepared: &Prepared) -> Hub {
 
 #[derive(Encode, Decode)]
 struct CachedSolution {
+    /// Per patch: what a session adopts when the first edit arrives.
     radiosity: Vec<[f32; 3]>,
+    /// Per vertex: what viewers are sent.
+    vertex_radiosity: Vec<[f32; 3]>,
     report_json: String,
 }
 
-const CACHE_MAGIC: &[u8; 8] = b"RCCACHE1";
+const CACHE_MAGIC: &[u8; 8] = b"RCCACHE2";
 
 fn cache_path(dir: &Path, scene_id: u64) -> PathBuf {
     dir.join(format!("{scene_id:016x}.radcast"))
 }
 
-/// The cached solution and its report, if the file holds one for `patch_count` patches.
-fn read_cache(path: &Path, patch_count: usize) -> Option<(CachedSolution, SolveReport)> {
+/// The cached solution and its report, if the file holds one for `mesh`'s patches and vertices.
+fn read_cache(path: &Path, mesh: &Mesh) -> Option<(CachedSolution, SolveReport)> {
     let bytes = std::fs::read(path).ok()?;
     let body = bytes.strip_prefix(CACHE_MAGIC.as_slice())?;
     let (cached, _): (CachedSolution, usize) =
         bincode::decode_from_slice(body, bincode::config::standard()).ok()?;
     let report = serde_json::from_str(&cached.report_json).ok()?;
-    (cached.radiosity.len() == patch_count
+    (cached.radiosity.len() == mesh.patches.len()
+        && cached.vertex_radiosity.len() == mesh.positions.len()
         && cached
             .radiosity
             .iter()
+            .chain(&cached.vertex_radiosity)
             .flatten()
             .all(|c| c.is_finite() && *c >= 0.0))
     .then_some((cached, report))
@@ -204,11 +203,11 @@ pub fn solve_and_publish(
         .map(|dir| (dir, cache_path(dir, prepared.scene_id)));
     if let Some((cached, report)) = cache
         .as_ref()
-        .and_then(|(_, path)| read_cache(path, prepared.mesh.patches.len()))
+        .and_then(|(_, path)| read_cache(path, &prepared.mesh))
     {
         tracing::info!("solution read from the cache");
         *shared.report.lock().expect("report lock") = Some(report);
-        hub.publish(&cached.radiosity, true);
+        hub.publish(&cached.vertex_radiosity, true);
         return Ok(Solution::Cached(cached.radiosity));
     }
     let last_snapshot = Mutex::new(Instant::now());
@@ -218,12 +217,14 @@ pub fn solve_and_publish(
             && last.elapsed() >= SNAPSHOT_INTERVAL
         {
             *last = Instant::now();
-            hub.publish(&to_f32(radiosity), false);
+            // Not final: the patches' means at the corners will do until the direct gather.
+            hub.publish(&to_f32(&prepared.mesh.corner_means(radiosity)), false);
         }
     };
     let mut session = session_for(prepared, &progress)?;
     let report = session.solve(&progress);
     let radiosity = to_f32(session.radiosity());
+    let vertex_radiosity = to_f32(&session.vertex_radiosity());
     let s = report.seconds;
     *shared.metrics.solve_seconds.lock().expect("metrics lock") = vec![
         ("mesh", s.mesh),
@@ -247,13 +248,14 @@ pub fn solve_and_publish(
     let report_json = serde_json::to_string(&report)?;
     // The report goes in before the final frame: a viewer that sees "final" may ask for it at once.
     *shared.report.lock().expect("report lock") = Some(report);
-    hub.publish(&radiosity, true);
+    hub.publish(&vertex_radiosity, true);
     if let Some((dir, path)) = cache {
         write_cache(
             dir,
             &path,
             &CachedSolution {
                 radiosity,
+                vertex_radiosity,
                 report_json,
             },
         )?;
@@ -332,7 +334,7 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
     *shared.report.lock().expect("report lock") = Some(report_for_viewers(&report));
     let version = shared
         .hub
-        .publish(&to_f32(session.radiosity()), report.converged);
+        .publish(&to_f32(&session.vertex_radiosity()), report.converged);
     tracing::info!(
         version,
         emissions = batch.emissions.len(),

@@ -43,20 +43,6 @@ struct Located {
     smooth: Rgb,
 }
 
-/// Radiosity at every mesh corner: the area-weighted mean of the patches that share it.
-pub fn corner_radiosity(mesh: &Mesh, radiosity: &[Rgb]) -> Vec<Rgb> {
-    let mut sums = vec![(Rgb::ZERO, 0.0); mesh.positions.len()];
-    for (patch, b) in mesh.patches.iter().zip(radiosity) {
-        for &c in &patch.corners[..patch.corner_count()] {
-            sums[c as usize].0 += *b * patch.area;
-            sums[c as usize].1 += patch.area;
-        }
-    }
-    sums.into_iter()
-        .map(|(sum, area)| if area > 0.0 { sum / area } else { Rgb::ZERO })
-        .collect()
-}
-
 /// Barycentric coordinates of `p` (in the plane) in triangle `a, b, c`.
 fn barycentric(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
     let (v0, v1, v2) = (b - a, c - a, p - a);

@@ -125,6 +125,22 @@ impl Mesh {
         }
     }
 
+    /// Per corner, the area-weighted mean of `values` (one per patch) over the patches that
+    /// share it: how a patch solution becomes corner values where nothing better is at hand
+    /// (progressive estimates, the emission-only state).
+    pub fn corner_means(&self, values: &[Rgb]) -> Vec<Rgb> {
+        let mut sums = vec![(Rgb::ZERO, 0.0); self.positions.len()];
+        for (patch, value) in self.patches.iter().zip(values) {
+            for &c in &patch.corners[..patch.corner_count()] {
+                sums[c as usize].0 += *value * patch.area;
+                sums[c as usize].1 += patch.area;
+            }
+        }
+        sums.into_iter()
+            .map(|(sum, area)| if area > 0.0 { sum / area } else { Rgb::ZERO })
+            .collect()
+    }
+
     /// Moves every patch of `object` (and the corners they use) by `offset`.
     pub fn translate_object(&mut self, object: u32, offset: DVec3) {
         let mut moved = vec![false; self.positions.len()];

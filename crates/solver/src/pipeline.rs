@@ -233,15 +233,20 @@ pub fn solve_scene(
 }
 
 /// Form factors and solve for a mesh already built from `scene` (the server meshes first so
-/// that viewers get the geometry while it solves). Returns the radiosity per mesh corner (what
-/// viewers are sent) and the report; `seconds.mesh` holds the BVH build only.
+/// that viewers get the geometry while it solves). `seconds.mesh` holds the BVH build only.
 pub fn solve_mesh(
     scene: &Scene,
     mesh: &Mesh,
     request: &SolveRequest,
     progress: &(dyn Fn(Progress) + Sync),
-) -> Result<(Vec<Rgb>, SolveReport), SolveError> {
+) -> Result<Solved, SolveError> {
     let mut session = Session::new(scene, mesh, request, progress)?;
     let report = session.solve(progress);
-    Ok((session.vertex_radiosity(), report))
+    Ok(Solved {
+        scene: scene.clone(),
+        vertex_radiosity: session.vertex_radiosity(),
+        mesh: session.mesh,
+        radiosity: session.radiosity,
+        report,
+    })
 }

@@ -323,11 +323,17 @@ impl Session {
     /// ([`CornerLight::corner_radiosity`]: direct light gathered at the corner, indirect light
     /// from the patches around it).
     pub fn vertex_radiosity(&self) -> Vec<Rgb> {
+        let mut emission = self.emission.clone();
+        for (e, object) in emission.iter_mut().zip(&self.patch_objects) {
+            if let Some(edited) = self.edited.get(object) {
+                *e = *edited;
+            }
+        }
         self.corner_light.corner_radiosity(
             &self.mesh,
             self.transfer.transport(),
             &self.radiosity,
-            &self.emission,
+            &emission,
         )
     }
 

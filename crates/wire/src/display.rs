@@ -1,11 +1,12 @@
-//! How patch radiosity becomes displayable colour, shared by every consumer (the software
+//! How vertex radiosity becomes displayable colour, shared by every consumer (the software
 //! renderer, the glTF export) so they agree.
 //!
-//! Smooth shading: each corner takes the area-weighted mean radiosity of the patches around it.
-//! Corners are shared within one input face only, so colours never blend across a crease.
+//! Smooth shading: frames carry one radiosity per geometry vertex, interpolated linearly over
+//! each patch's fan triangles (`corners[0], corners[k], corners[k + 1]`). Vertices are shared
+//! within one input face only, so colours never blend across a crease.
 //!
-//! Tone map: exposure `k = 0.18 / Lavg`, `Lavg` the area-weighted geometric mean of the patches'
-//! Rec. 709 luminance (Reinhard et al. 2002, "Photographic Tone Reproduction", eq. 1-2); each
+//! Tone map: exposure `k = 0.18 / Lavg`, `Lavg` the area-weighted geometric mean of the
+//! vertices' Rec. 709 luminance (each patch's area shared among its corners) (Reinhard et al. 2002, "Photographic Tone Reproduction", eq. 1-2); each
 //! channel becomes `x / (1 + x)` with `x = k * radiosity`. [`srgb_byte`] then applies the sRGB
 //! transfer function (IEC 61966-2-1) for 8-bit images.
 
@@ -46,46 +47,28 @@ pub fn patch_area(geometry: &Geometry, patch: &[u32; 4]) -> f32 {
     }
 }
 
-/// Radiosity at every corner: the area-weighted mean of the patches around it.
-pub fn corner_radiosity(geometry: &Geometry, patch_radiosity: &[Rgb]) -> Vec<Rgb> {
-    let mut sums = vec![([0.0f32; 3], 0.0f32); geometry.positions.len()];
-    for (patch, rgb) in geometry.patches.iter().zip(patch_radiosity) {
-        let area = patch_area(geometry, patch);
-        for &c in corners(patch) {
-            let (sum, weight) = &mut sums[c as usize];
-            (0..3).for_each(|k| sum[k] += rgb[k] * area);
-            *weight += area;
-        }
-    }
-    sums.into_iter()
-        .map(|(sum, area)| {
-            if area > 0.0 {
-                sum.map(|s| s / area)
-            } else {
-                [0.0; 3]
-            }
-        })
-        .collect()
-}
-
 /// Rec. 709 luminance.
 fn luminance(rgb: &Rgb) -> f32 {
     0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
 }
 
 /// The exposure `0.18 / Lavg` of the module docs (1 for a black scene).
-pub fn exposure(geometry: &Geometry, patch_radiosity: &[Rgb]) -> f32 {
-    let brightest = patch_radiosity.iter().map(luminance).fold(0.0, f32::max);
+pub fn exposure(geometry: &Geometry, vertex_radiosity: &[Rgb]) -> f32 {
+    let brightest = vertex_radiosity.iter().map(luminance).fold(0.0, f32::max);
     if brightest <= 0.0 {
         return 1.0;
     }
-    // Black patches would send the log-average to zero; floor them far below the brightest.
+    // Black vertices would send the log-average to zero; floor them far below the brightest.
     let floor = 1e-4 * brightest;
     let (mut log_sum, mut area_sum) = (0.0f64, 0.0f64);
-    for (patch, rgb) in geometry.patches.iter().zip(patch_radiosity) {
-        let area = patch_area(geometry, patch) as f64;
-        log_sum += area * (luminance(rgb).max(floor) as f64).ln();
-        area_sum += area;
+    for patch in &geometry.patches {
+        let used = corners(patch);
+        let share = patch_area(geometry, patch) as f64 / used.len() as f64;
+        for &c in used {
+            let rgb = vertex_radiosity.get(c as usize).unwrap_or(&[0.0; 3]);
+            log_sum += share * (luminance(rgb).max(floor) as f64).ln();
+            area_sum += share;
+        }
     }
     (0.18 / (log_sum / area_sum.max(f64::MIN_POSITIVE)).exp()) as f32
 }

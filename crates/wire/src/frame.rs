@@ -8,10 +8,11 @@ use bincode::{Decode, Encode};
 use std::borrow::Cow;
 
 /// The protocol version this crate speaks; a [`Hello`] with another one is refused.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
-/// The most patches a frame may claim: bounds what a decoder allocates for hostile input.
-pub const MAX_PATCHES: u32 = 1 << 26;
+/// The most vertices a frame (or patches a geometry) may claim: bounds what a decoder allocates
+/// for hostile input.
+pub const MAX_VERTICES: u32 = 1 << 26;
 
 /// Flag: the payload is LZ4-compressed (a u32 uncompressed size, then an LZ4 block).
 pub const FLAG_COMPRESSED: u8 = 1;
@@ -41,8 +42,8 @@ pub struct Hello {
     pub scene_id: u64,
     /// Bumped whenever the geometry changes: refetch `/api/scene` when it differs.
     pub geometry_version: u64,
-    /// Patches in every frame.
-    pub patch_count: u32,
+    /// Values in every frame: the geometry's vertex count.
+    pub vertex_count: u32,
 }
 
 /// What every frame says about the solution it carries.
@@ -54,29 +55,29 @@ pub struct FrameInfo {
     pub sent_at_unix_micros: u64,
     /// Decoded RGB9E5 values are multiplied by this (a power of two) to give W/m^2.
     pub scale: f32,
-    /// Patches in the buffer.
-    pub patch_count: u32,
+    /// Values in the buffer: one per geometry vertex.
+    pub vertex_count: u32,
     /// The solver converged for this version.
     pub is_final: bool,
 }
 
-/// The whole patch buffer.
+/// The whole buffer: one colour per geometry vertex.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FullFrame {
     /// Version, time, scale, size.
     pub info: FrameInfo,
-    /// One RGB9E5 code per patch, in patch order.
+    /// One RGB9E5 code per vertex, in the order of [`crate::Geometry::positions`].
     pub colours: Vec<u32>,
 }
 
-/// Only the patches whose code changed since `base_version`.
+/// Only the vertices whose code changed since `base_version`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DeltaFrame {
     /// The version a receiver must hold to apply this.
     pub base_version: u64,
     /// Version, time, scale, size after applying.
     pub info: FrameInfo,
-    /// Changed patch indices, strictly increasing.
+    /// Changed vertex indices, strictly increasing.
     pub indices: Vec<u32>,
     /// New codes, one per index.
     pub colours: Vec<u32>,
@@ -92,8 +93,8 @@ pub enum ServerMessage {
     /// Changes against an earlier version.
     Delta(DeltaFrame),
     /// The geometry changed (an object moved): fetch `/api/scene` again. On a uniform mesh the
-    /// patches stay the same; a hierarchy's leaves change, and the next full frame carries
-    /// their new count.
+    /// vertices stay the same; a hierarchy's leaves change, and the next full frame carries
+    /// their new vertex count.
     GeometryChanged {
         /// The new geometry version.
         geometry_version: u64,
@@ -112,7 +113,7 @@ struct FullHeader {
     solution_version: u64,
     sent_at_unix_micros: u64,
     scale: f32,
-    patch_count: u32,
+    vertex_count: u32,
 }
 
 #[derive(Encode, Decode)]
@@ -121,7 +122,7 @@ struct DeltaHeader {
     solution_version: u64,
     sent_at_unix_micros: u64,
     scale: f32,
-    patch_count: u32,
+    vertex_count: u32,
     change_count: u32,
 }
 
@@ -163,7 +164,7 @@ impl ServerMessage {
                     solution_version: info.solution_version,
                     sent_at_unix_micros: info.sent_at_unix_micros,
                     scale: info.scale,
-                    patch_count: frame.colours.len() as u32,
+                    vertex_count: frame.colours.len() as u32,
                 };
                 let mut out = encode_header(KIND_FULL, flags_for(info), header);
                 let payload: Vec<u8> = frame.colours.iter().flat_map(|c| c.to_le_bytes()).collect();
@@ -177,7 +178,7 @@ impl ServerMessage {
                     solution_version: info.solution_version,
                     sent_at_unix_micros: info.sent_at_unix_micros,
                     scale: info.scale,
-                    patch_count: info.patch_count,
+                    vertex_count: info.vertex_count,
                     change_count: frame.indices.len() as u32,
                 };
                 let mut out = encode_header(KIND_DELTA, flags_for(info), header);
@@ -214,8 +215,8 @@ impl ServerMessage {
             KIND_FULL => {
                 check_flags(flags, FLAG_COMPRESSED | FLAG_FINAL)?;
                 let (header, used): (FullHeader, usize) = decode_header(rest)?;
-                check_patch_count(header.patch_count)?;
-                let expected = header.patch_count as usize * 4;
+                check_vertex_count(header.vertex_count)?;
+                let expected = header.vertex_count as usize * 4;
                 let payload = take_payload(&rest[used..], flags, expected)?;
                 if payload.len() != expected {
                     return Err(DecodeError::Length {
@@ -228,7 +229,7 @@ impl ServerMessage {
                     header.solution_version,
                     header.sent_at_unix_micros,
                     header.scale,
-                    header.patch_count,
+                    header.vertex_count,
                     flags,
                 )?;
                 Ok(ServerMessage::Full(FullFrame {
@@ -239,18 +240,18 @@ impl ServerMessage {
             KIND_DELTA => {
                 check_flags(flags, FLAG_COMPRESSED | FLAG_FINAL)?;
                 let (header, used): (DeltaHeader, usize) = decode_header(rest)?;
-                check_patch_count(header.patch_count)?;
-                if header.change_count > header.patch_count {
+                check_vertex_count(header.vertex_count)?;
+                if header.change_count > header.vertex_count {
                     return Err(DecodeError::TooLarge {
                         what: "delta change count",
                         size: header.change_count as u64,
-                        limit: header.patch_count as u64,
+                        limit: header.vertex_count as u64,
                     });
                 }
                 // Each change takes at most 5 varint bytes and 4 colour bytes.
                 let payload = take_payload(&rest[used..], flags, header.change_count as usize * 9)?;
                 let (indices, colour_bytes) =
-                    read_indices(&payload, header.change_count, header.patch_count)?;
+                    read_indices(&payload, header.change_count, header.vertex_count)?;
                 let expected = header.change_count as usize * 4;
                 if colour_bytes.len() != expected {
                     return Err(DecodeError::Length {
@@ -263,7 +264,7 @@ impl ServerMessage {
                     header.solution_version,
                     header.sent_at_unix_micros,
                     header.scale,
-                    header.patch_count,
+                    header.vertex_count,
                     flags,
                 )?;
                 Ok(ServerMessage::Delta(DeltaFrame {
@@ -325,12 +326,12 @@ fn check_flags(flags: u8, allowed: u8) -> Result<(), DecodeError> {
     }
 }
 
-fn check_patch_count(count: u32) -> Result<(), DecodeError> {
-    if count > MAX_PATCHES {
+fn check_vertex_count(count: u32) -> Result<(), DecodeError> {
+    if count > MAX_VERTICES {
         Err(DecodeError::TooLarge {
-            what: "patch count",
+            what: "vertex count",
             size: count as u64,
-            limit: MAX_PATCHES as u64,
+            limit: MAX_VERTICES as u64,
         })
     } else {
         Ok(())
@@ -342,7 +343,7 @@ fn frame_info(
     solution_version: u64,
     sent_at_unix_micros: u64,
     scale: f32,
-    patch_count: u32,
+    vertex_count: u32,
     flags: u8,
 ) -> Result<FrameInfo, DecodeError> {
     if !(scale.is_finite() && scale > 0.0) {
@@ -354,7 +355,7 @@ fn frame_info(
         solution_version,
         sent_at_unix_micros,
         scale,
-        patch_count,
+        vertex_count,
         is_final: flags & FLAG_FINAL != 0,
     })
 }
@@ -425,7 +426,7 @@ fn write_varint(out: &mut Vec<u8>, mut value: u32) {
 fn read_indices(
     bytes: &[u8],
     count: u32,
-    patch_count: u32,
+    vertex_count: u32,
 ) -> Result<(Vec<u32>, &[u8]), DecodeError> {
     let mut indices = Vec::with_capacity(count as usize);
     let (mut position, mut next) = (0usize, 0u64);
@@ -450,8 +451,11 @@ fn read_indices(
             }
         }
         let index = next + gap;
-        if index >= patch_count as u64 {
-            return Err(DecodeError::IndexOutOfRange { index, patch_count });
+        if index >= vertex_count as u64 {
+            return Err(DecodeError::IndexOutOfRange {
+                index,
+                vertex_count,
+            });
         }
         indices.push(index as u32);
         next = index + 1;

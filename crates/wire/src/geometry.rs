@@ -2,7 +2,7 @@
 //! object names, in a versioned binary form (docs/PROTOCOL.md).
 
 use crate::DecodeError;
-use crate::frame::{MAX_PATCHES, config};
+use crate::frame::{MAX_VERTICES, config};
 use bincode::{Decode, Encode};
 
 /// Leading bytes of an encoded [`Geometry`].
@@ -68,11 +68,11 @@ impl Geometry {
 
     fn validate(&self) -> Result<(), DecodeError> {
         let patch_count = self.patches.len();
-        if patch_count > MAX_PATCHES as usize {
+        if patch_count > MAX_VERTICES as usize {
             return Err(DecodeError::TooLarge {
                 what: "patch count",
                 size: patch_count as u64,
-                limit: MAX_PATCHES as u64,
+                limit: MAX_VERTICES as u64,
             });
         }
         if self.patch_objects.len() != patch_count {

@@ -5,7 +5,7 @@
 //! header, a JSON chunk padded with spaces and a BIN chunk padded with zeros, each to 4 bytes.
 
 use crate::Geometry;
-use crate::display::{corner_radiosity, corners, exposure, tone_map};
+use crate::display::{corners, exposure, tone_map};
 use std::fmt::Write;
 
 const GLB_MAGIC: u32 = 0x4654_6C67; // "glTF"
@@ -33,10 +33,9 @@ fn json_string(text: &str) -> String {
     out
 }
 
-/// Encodes `geometry` with per-patch radiosity (W/m^2) as a GLB file.
-pub fn encode_glb(geometry: &Geometry, patch_radiosity: &[[f32; 3]]) -> Vec<u8> {
-    let corner_colours = corner_radiosity(geometry, patch_radiosity);
-    let k = exposure(geometry, patch_radiosity);
+/// Encodes `geometry` with per-vertex radiosity (W/m^2) as a GLB file.
+pub fn encode_glb(geometry: &Geometry, vertex_radiosity: &[[f32; 3]]) -> Vec<u8> {
+    let k = exposure(geometry, vertex_radiosity);
     let mut bin: Vec<u8> = Vec::new();
     let (mut views, mut accessors, mut meshes, mut nodes) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
@@ -65,7 +64,13 @@ pub fn encode_glb(geometry: &Geometry, patch_radiosity: &[[f32; 3]]) -> Vec<u8> 
                     if local[c as usize] == u32::MAX {
                         local[c as usize] = positions.len() as u32;
                         positions.push(geometry.positions[c as usize]);
-                        colours.push(tone_map(corner_colours[c as usize], k));
+                        colours.push(tone_map(
+                            vertex_radiosity
+                                .get(c as usize)
+                                .copied()
+                                .unwrap_or_default(),
+                            k,
+                        ));
                     }
                     local[c as usize]
                 })

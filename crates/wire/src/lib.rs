@@ -1,9 +1,9 @@
 //! The radcast wire protocol: what the server sends and viewers receive. No async runtime.
 //!
-//! - [`rgb9e5`]: each patch's colour in 4 bytes (shared-exponent HDR).
+//! - [`rgb9e5`]: each vertex's colour in 4 bytes (shared-exponent HDR).
 //! - [`frame`]: hello, full and delta frames, and the viewer's requests.
 //! - [`geometry`]: the scene as a viewer fetches it once.
-//! - [`PatchBuffer`]: a viewer's copy of the colours, kept current by applying frames.
+//! - [`ColourBuffer`]: a viewer's copy of the colours, kept current by applying frames.
 //! - [`summary`]: the JSON of `/api/solution`, typed.
 //! - [`display`]: smooth shading and the tone map every consumer shares; [`gltf`]: GLB export.
 
@@ -67,13 +67,13 @@ pub enum DecodeError {
         /// Bytes found.
         got: usize,
     },
-    /// A delta names a patch that does not exist.
-    #[error("patch index {index} out of range (patch count {patch_count})")]
+    /// A delta names a vertex that does not exist.
+    #[error("vertex index {index} out of range (vertex count {vertex_count})")]
     IndexOutOfRange {
         /// The index.
         index: u64,
-        /// Patches in the frame.
-        patch_count: u32,
+        /// Vertices in the frame.
+        vertex_count: u32,
     },
     /// Bytes after the end of a complete message.
     #[error("{0} trailing bytes after the message")]
@@ -145,16 +145,16 @@ pub enum ApplyError {
     },
 }
 
-/// A viewer's copy of the patch colours.
+/// A viewer's copy of the vertex colours.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct PatchBuffer {
+pub struct ColourBuffer {
     /// The frame info of the state held, none before the first full frame.
     pub info: Option<FrameInfo>,
-    /// One code per patch.
+    /// One code per geometry vertex.
     pub colours: Vec<u32>,
 }
 
-impl PatchBuffer {
+impl ColourBuffer {
     /// Applies a frame; a hello or a geometry change changes no colour.
     pub fn apply(&mut self, message: &ServerMessage) -> Result<(), ApplyError> {
         match message {
@@ -166,7 +166,7 @@ impl PatchBuffer {
             ServerMessage::Delta(delta) => {
                 let held = self.info.map(|i| i.solution_version);
                 if held != Some(delta.base_version)
-                    || self.colours.len() != delta.info.patch_count as usize
+                    || self.colours.len() != delta.info.vertex_count as usize
                 {
                     return Err(ApplyError::BaseMismatch {
                         base: delta.base_version,
@@ -182,7 +182,7 @@ impl PatchBuffer {
         Ok(())
     }
 
-    /// Radiosity of every patch, W/m^2.
+    /// Radiosity at every geometry vertex, W/m^2.
     pub fn radiosity(&self) -> Vec<[f32; 3]> {
         let scale = self.info.map_or(1.0, |info| info.scale);
         self.colours

@@ -9,8 +9,8 @@ use serde::{Deserialize, Serialize};
 pub struct SolutionSummary {
     /// Scene content and solve settings, as 16 lower-case hex digits (the hello's `scene_id`).
     pub scene_id: String,
-    /// Patches of the current geometry: every frame of this version has this many codes.
-    pub patch_count: u32,
+    /// Vertices of the current geometry: every frame of this version has this many codes.
+    pub vertex_count: u32,
     /// The geometry these colours belong to (the hello's and `/api/scene`'s version).
     pub geometry_version: u64,
     /// The current solution version.

@@ -1,15 +1,15 @@
 //! Round trips and hostile bytes for every message.
 
 use proptest::prelude::*;
-use wire::frame::{FLAG_COMPRESSED, MAX_PATCHES};
+use wire::frame::{FLAG_COMPRESSED, MAX_VERTICES};
 use wire::*;
 
-fn info(version: u64, patch_count: u32, is_final: bool) -> FrameInfo {
+fn info(version: u64, vertex_count: u32, is_final: bool) -> FrameInfo {
     FrameInfo {
         solution_version: version,
         sent_at_unix_micros: version.wrapping_add(1_700_000_000_000_000),
         scale: 0.5,
-        patch_count,
+        vertex_count,
         is_final,
     }
 }
@@ -27,7 +27,7 @@ fn hello_round_trips_and_other_versions_are_refused() {
         protocol_version: PROTOCOL_VERSION,
         scene_id: 42,
         geometry_version: 3,
-        patch_count: 600,
+        vertex_count: 600,
     };
     let bytes = ServerMessage::Hello(hello).encode();
     assert_eq!(bytes.len(), 2 + 2 + 8 + 8 + 4);
@@ -98,15 +98,15 @@ fn truncation_anywhere_is_an_error_not_a_panic() {
 
 #[test]
 fn hostile_sizes_and_indices_are_refused() {
-    // A full frame claiming 2^26 + 1 patches.
+    // A full frame claiming 2^26 + 1 vertices.
     let mut bytes = full(vec![0; 4]).encode();
-    bytes[2 + 20..2 + 24].copy_from_slice(&(MAX_PATCHES + 1).to_le_bytes());
+    bytes[2 + 20..2 + 24].copy_from_slice(&(MAX_VERTICES + 1).to_le_bytes());
     assert_eq!(
         ServerMessage::decode(&bytes),
         Err(DecodeError::TooLarge {
-            what: "patch count",
-            size: MAX_PATCHES as u64 + 1,
-            limit: MAX_PATCHES as u64
+            what: "vertex count",
+            size: MAX_VERTICES as u64 + 1,
+            limit: MAX_VERTICES as u64
         })
     );
     // A delta whose index is past the end.
@@ -121,7 +121,7 @@ fn hostile_sizes_and_indices_are_refused() {
         ServerMessage::decode(&bytes),
         Err(DecodeError::IndexOutOfRange {
             index: 12,
-            patch_count: 10
+            vertex_count: 10
         })
     );
     // A compressed payload that claims to inflate past what the header allows.
@@ -157,7 +157,7 @@ fn buffers_follow_full_and_delta_frames_and_refuse_foreign_bases() {
     new[49] = 7;
     let (indices, colours) = changes(&old, &new);
     assert_eq!(indices, [3, 49]);
-    let mut buffer = PatchBuffer::default();
+    let mut buffer = ColourBuffer::default();
     let delta = ServerMessage::Delta(DeltaFrame {
         base_version: 7,
         info: info(8, 50, true),

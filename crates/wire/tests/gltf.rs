@@ -24,7 +24,10 @@ fn glb_structure_matches_the_specification() {
         objects: vec!["floor".into(), "a \"quoted\" lamp".into()],
         camera: None,
     };
-    let glb = wire::gltf::encode_glb(&geometry, &[[0.5, 0.4, 0.3], [20.0, 20.0, 20.0]]);
+    // One radiosity per vertex: the floor's four, then the lamp's three.
+    let mut radiosity = vec![[0.5, 0.4, 0.3]; 4];
+    radiosity.extend([[20.0, 20.0, 20.0]; 3]);
+    let glb = wire::gltf::encode_glb(&geometry, &radiosity);
     assert_eq!(&glb[0..4], b"glTF");
     assert_eq!(word(&glb, 4), 2);
     assert_eq!(word(&glb, 8) as usize, glb.len());
