@@ -208,18 +208,18 @@ impl Occluders {
     /// Whether every one of [`CLOSURE_RAYS`] cosine-distributed rays from stratified points of the
     /// patch meets the front of some face: then all the light leaving it lands on a patch, and its
     /// row must sum to one however coarsely visibility was sampled. Rays that escape or meet a back
-    /// face mean the view is open, and the row is left as computed.
+    /// face mean the view is open, and the row is left as computed, unless they start from a
+    /// buried point ([`Occluders::is_buried`]: under a box standing on the patch), which no light
+    /// reaches or leaves: a floor with a box on it is as closed as the room around it.
     pub fn sees_closed_view(&self, p: &Patch, index: usize) -> bool {
         let seed = splitmix64(index as u64 ^ 0xC105_ED00);
         (0..CLOSURE_RAYS).all(|k| {
             let (u, v) = stratified_uv(k, seed);
             let (s, t) = stratified_uv(k, splitmix64(seed));
-            self.closest_hit(
-                p.polygon.point_at(u, v),
-                cosine_direction(p.normal, s, t),
-                p.face,
-            )
-            .is_some_and(|hit| hit.front)
+            let origin = p.polygon.point_at(u, v);
+            self.closest_hit(origin, cosine_direction(p.normal, s, t), p.face)
+                .is_some_and(|hit| hit.front)
+                || self.is_buried(origin, p.normal, p.face, seed ^ k as u64)
         })
     }
 

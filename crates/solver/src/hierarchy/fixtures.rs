@@ -8,7 +8,7 @@ use crate::visibility::Occluders;
 use glam::{DVec3, dvec3};
 
 /// A closed unit cube, faces inwards, every face emitting 1 with reflectance 0.5.
-pub(super) fn closed_cube() -> Scene {
+pub(crate) fn closed_cube() -> Scene {
     let mut scene = Scene::default();
     let material = Material {
         reflectance: Rgb::splat(0.5),
@@ -29,7 +29,7 @@ pub(super) fn closed_cube() -> Scene {
 }
 
 /// The hierarchy of `scene` built at error knob `error`, other settings at their defaults.
-pub(super) fn build(scene: &Scene, error: f64) -> Hierarchy {
+pub(crate) fn build(scene: &Scene, error: f64) -> Hierarchy {
     let occluders = Occluders::new(scene);
     let settings = HierarchySettings {
         error,
@@ -49,7 +49,7 @@ pub(super) fn build(scene: &Scene, error: f64) -> Hierarchy {
 
 /// A 4 x 4 room (faces inwards) lit by its ceiling, with a closed box of five faces standing
 /// on the floor over [1, 2] x [1, 2]: lattice lines of the floor at depth 2.
-pub(super) fn room_with_a_box() -> Scene {
+pub(crate) fn room_with_a_box() -> Scene {
     let mut scene = Scene::default();
     let grey = Material {
         reflectance: Rgb::splat(0.5),
@@ -79,7 +79,7 @@ pub(super) fn room_with_a_box() -> Scene {
 
 /// Adds an object `name` with one face: the parallelogram at `origin` spanned by `u` then `v`
 /// (its front faces along `u x v`).
-pub(super) fn add_parallelogram(
+pub(crate) fn add_parallelogram(
     scene: &mut Scene,
     name: &str,
     (origin, u, v): (DVec3, DVec3, DVec3),
@@ -95,7 +95,7 @@ pub(super) fn add_parallelogram(
 
 /// The top and four sides of a unit box standing at `corner` (its least x, y, z), facing
 /// out, as (origin, u, v) for [`add_parallelogram`]: closed against a floor it stands on.
-pub(super) fn unit_box(corner: DVec3) -> [(DVec3, DVec3, DVec3); 5] {
+pub(crate) fn unit_box(corner: DVec3) -> [(DVec3, DVec3, DVec3); 5] {
     let (x, y, z, o) = (DVec3::X, DVec3::Y, DVec3::Z, corner);
     [
         (o + y, z, x),

@@ -39,7 +39,7 @@ mod shaft;
 mod tree;
 
 #[cfg(test)]
-mod fixtures;
+pub(crate) mod fixtures;
 
 use crate::Progress;
 use crate::geometry::Polygon;
