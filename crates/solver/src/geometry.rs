@@ -94,6 +94,25 @@ impl Polygon {
             .fold(0.0, f64::max)
     }
 
+    /// The point of the (planar, convex) polygon nearest to `x`.
+    pub fn closest_point(&self, x: DVec3) -> DVec3 {
+        let (c, n) = (self.corners(), self.normal());
+        let projected = x - n * n.dot(x - c[0]);
+        let edges = || (0..c.len()).map(|k| (c[k], c[(k + 1) % c.len()]));
+        if edges().all(|(a, b)| (b - a).cross(projected - a).dot(n) >= 0.0) {
+            return projected;
+        }
+        edges()
+            .map(|(a, b)| {
+                let edge = b - a;
+                let t = ((projected - a).dot(edge) / edge.length_squared().max(f64::MIN_POSITIVE))
+                    .clamp(0.0, 1.0);
+                a + edge * t
+            })
+            .min_by(|p, q| p.distance_squared(x).total_cmp(&q.distance_squared(x)))
+            .unwrap_or(projected)
+    }
+
     /// The point at parameters `(u, v)` in the unit square: bilinear for a quad; for a triangle
     /// the square is folded onto it, so uniform `(u, v)` gives uniform points.
     pub fn point_at(&self, u: f64, v: f64) -> DVec3 {
@@ -411,6 +430,24 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn the_closest_point_is_the_projection_inside_and_on_the_border_outside() {
+        let square = unit_square_at_height(0.0);
+        let near = |a: DVec3, b: DVec3| a.distance(b) < 1e-12;
+        assert!(near(
+            square.closest_point(DVec3::new(0.25, 0.5, 3.0)),
+            DVec3::new(0.25, 0.5, 0.0)
+        ));
+        assert!(near(
+            square.closest_point(DVec3::new(2.0, 0.5, -1.0)),
+            DVec3::new(1.0, 0.5, 0.0)
+        ));
+        assert!(near(
+            square.closest_point(DVec3::new(-1.0, -2.0, 1.0)),
+            DVec3::ZERO
+        ));
     }
 
     #[test]

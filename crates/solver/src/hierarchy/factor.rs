@@ -69,6 +69,7 @@ impl Refiner<'_> {
             });
             p.polygon.corners().iter().for_each(|c| extend(at(*c)));
             extend(at(p.centroid));
+            extend(at(nearest_in_front(p, q)));
             let visibility = self.hierarchy.shaft_visibility(p, q);
             if visibility != Visibility::Partial {
                 self.shaft_decided.fetch_add(1, Ordering::Relaxed);
@@ -261,6 +262,17 @@ pub(super) fn tangent_coordinates(patch: &Patch, point: DVec3) -> [f32; 2] {
 /// The receiver quadrature level for the factor between elements `p` and `q`: the dense
 /// path's near-field rule, and at least 3 when the factor varies over the receiver more than its
 /// four-point mean (a source seen from only part of the receiver, which those points can miss).
+/// The receiver's point nearest the source's centroid, moved a little toward the side the
+/// source faces: where a source close beside a large receiver (a box standing on the floor)
+/// sends the most. Gauss points, corners and centroid all lie far from such a source and saw
+/// a floor lit evenly by the box beside it (the floor next to it was 16% dark in a furnace).
+fn nearest_in_front(p: &Patch, q: &Patch) -> DVec3 {
+    let toward_front = q.normal - p.normal * p.normal.dot(q.normal);
+    let nearest = p.polygon.closest_point(q.centroid);
+    p.polygon
+        .closest_point(nearest + toward_front.normalize_or_zero() * (1e-3 * p.radius))
+}
+
 fn integration_level(p: &Patch, q: &Patch, mean: f64, spread: f64) -> u32 {
     let near = near_pair_level(p, q).unwrap_or(1);
     if spread > mean { near.max(3) } else { near }
