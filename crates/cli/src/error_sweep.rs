@@ -60,10 +60,15 @@ pub fn run(
     repeat: usize,
     (out_dir, name): (&Path, &str),
     command: &str,
+    peer_files: &[PathBuf],
 ) -> anyhow::Result<()> {
     if scenes.is_empty() {
         bail!("name at least one scene");
     }
+    let peers = peer_files
+        .iter()
+        .map(|path| Peers::load(path))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let mut rows = Vec::new();
     for scene_path in scenes {
         let reference = load_reference(scene_path)?;
@@ -164,13 +169,104 @@ pub fn run(
     }
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("{}: cannot create", out_dir.display()))?;
-    let table = markdown(&rows, command, scenes, name)?;
+    let mut table = markdown(&rows, command, scenes, name)?;
+    for p in &peers {
+        table.push_str(&p.comparison(&rows)?);
+    }
     print!("{table}");
     let table_path = out_dir.join(format!("{name}.md"));
     std::fs::write(&table_path, &table)
         .with_context(|| format!("{}: cannot write", table_path.display()))?;
-    plot(&rows, &out_dir.join(format!("{name}.svg")))?;
+    plot(&rows, &peers, &out_dir.join(format!("{name}.svg")))?;
     Ok(())
+}
+
+/// Another system's rows on one scene, measured elsewhere (a file under docs/peers/).
+#[derive(serde::Deserialize)]
+struct Peers {
+    scene: String,
+    /// How and where they were measured.
+    source: String,
+    rows: Vec<PeerRow>,
+}
+
+/// One setting of another system.
+#[derive(serde::Deserialize)]
+struct PeerRow {
+    system: String,
+    setting: String,
+    leaves: u64,
+    links: u64,
+    seconds: f64,
+    flat_rms: f64,
+    smooth_rms: f64,
+    energy: f64,
+}
+
+impl Peers {
+    fn load(path: &Path) -> anyhow::Result<Peers> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a peers file (scene, source, rows)", path.display()))
+    }
+
+    /// The peer's rows, and radcast's hierarchical seconds at each row's smooth and flat RMS
+    /// (log-log between the two hierarchical rows that bracket it; ~ beyond them).
+    fn comparison(&self, rows: &[Row]) -> anyhow::Result<String> {
+        let mut ours: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.scene == self.scene && r.method.starts_with("hierarchical"))
+            .collect();
+        ours.sort_by_key(|r| r.patches);
+        let mut out = String::new();
+        writeln!(
+            out,
+            "\n## Against {} on `{}`\n",
+            self.rows.first().map_or("peers", |r| r.system.as_str()),
+            self.scene
+        )?;
+        writeln!(out, "Peer rows: {}.\n", self.source)?;
+        writeln!(
+            out,
+            "radcast's hierarchical seconds at the peer's error, interpolated log-log between the hierarchical rows above that bracket it (~: extrapolated from the nearest two); a ratio above 1 means radcast is faster.\n"
+        )?;
+        writeln!(
+            out,
+            "| system | setting | leaves | links | seconds | smooth RMS | flat RMS | energy | radcast s at that smooth RMS | ratio | radcast s at that flat RMS | ratio |"
+        )?;
+        writeln!(
+            out,
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        )?;
+        for p in &self.rows {
+            let at =
+                |target: f64, reading: fn(&Row) -> f64| match seconds_at(&ours, target, reading) {
+                    Some((seconds, extrapolated)) => format!(
+                        "{}{seconds:.3} | {}{:.1}×",
+                        if extrapolated { "~" } else { "" },
+                        if extrapolated { "~" } else { "" },
+                        p.seconds / seconds
+                    ),
+                    None => "– | –".into(),
+                };
+            writeln!(
+                out,
+                "| {} | {} | {} | {} | {:.3} | {:.4} | {:.4} | {:+.4} | {} | {} |",
+                p.system,
+                p.setting,
+                p.leaves,
+                p.links,
+                p.seconds,
+                p.smooth_rms,
+                p.flat_rms,
+                p.energy,
+                at(p.smooth_rms, |r| r.error.smooth.rms),
+                at(p.flat_rms, |r| r.error.flat.rms),
+            )?;
+        }
+        Ok(out)
+    }
 }
 
 fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf], name: &str) -> anyhow::Result<String> {
@@ -178,7 +274,8 @@ fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf], name: &str) -> anyh
     writeln!(out, "# Speed against error\n")?;
     writeln!(
         out,
-        "Made by `{command}` on this project's 2-core machine (timings: medians; errors are deterministic)."
+        "Made by `{command}` on this project's 2-core machine, {} solver thread(s) (`RAYON_NUM_THREADS`; timings: medians; errors are deterministic).",
+        rayon::current_num_threads()
     )?;
     writeln!(
         out,
@@ -186,7 +283,7 @@ fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf], name: &str) -> anyh
     )?;
     writeln!(
         out,
-        "non-emitting surfaces: *smooth* is what viewers show (corner-interpolated), *flat* the patch value;"
+        "non-emitting surfaces: *smooth* is what viewers show (the vertex values interpolated), *flat* the patch value;"
     )?;
     writeln!(
         out,
@@ -266,7 +363,11 @@ fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf], name: &str) -> anyh
             })
             .collect();
         dense.sort_by_key(|r| r.patches);
-        let Some(((seconds, patches), extrapolated)) = dense_at(&dense, h.error.smooth.rms) else {
+        let smooth = |r: &Row| r.error.smooth.rms;
+        let (Some((seconds, extrapolated)), Some((patches, _))) = (
+            seconds_at(&dense, h.error.smooth.rms, smooth),
+            interpolate_at(&dense, h.error.smooth.rms, smooth, |r| r.patches as f64),
+        ) else {
             continue;
         };
         writeln!(
@@ -288,36 +389,45 @@ fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf], name: &str) -> anyh
     Ok(out)
 }
 
-/// Dense (seconds, patches) at smooth RMS `target`: log-log interpolation between the bracketing
-/// rows of `dense` (sorted by patches, error falling), or extrapolation from the last two; and
+/// Total seconds of `rows` (sorted by patches, error falling) where `reading` is `target`
+/// ([`interpolate_at`]).
+fn seconds_at(rows: &[&Row], target: f64, reading: fn(&Row) -> f64) -> Option<(f64, bool)> {
+    interpolate_at(rows, target, reading, |r| r.seconds[3])
+}
+
+/// `value` of `rows` (sorted by patches, error falling) where `reading` is `target`: log-log
+/// interpolation between the bracketing rows, or extrapolation from the nearest two; and
 /// whether it was extrapolated.
-fn dense_at(dense: &[&Row], target: f64) -> Option<((f64, f64), bool)> {
-    if dense.len() < 2 {
+fn interpolate_at(
+    rows: &[&Row],
+    target: f64,
+    reading: fn(&Row) -> f64,
+    value: fn(&Row) -> f64,
+) -> Option<(f64, bool)> {
+    if rows.len() < 2 {
         return None;
     }
-    let pair = dense
+    let pair = rows
         .windows(2)
-        .find(|w| w[0].error.smooth.rms >= target && target >= w[1].error.smooth.rms);
+        .find(|w| reading(w[0]) >= target && target >= reading(w[1]));
     let (a, b, extrapolated) = match pair {
         Some(w) => (w[0], w[1], false),
-        None => (dense[dense.len() - 2], dense[dense.len() - 1], true),
+        // Past the coarse end: the first two; past the fine end: the last two.
+        None if target > reading(rows[0]) => (rows[0], rows[1], true),
+        None => (rows[rows.len() - 2], rows[rows.len() - 1], true),
     };
-    let (ea, eb) = (a.error.smooth.rms.ln(), b.error.smooth.rms.ln());
+    let (ea, eb) = (reading(a).ln(), reading(b).ln());
     if ea == eb {
         return None;
     }
     let t = (target.ln() - ea) / (eb - ea);
-    let at = |x: f64, y: f64| (x.ln() + t * (y.ln() - x.ln())).exp();
     Some((
-        (
-            at(a.seconds[3], b.seconds[3]),
-            at(a.patches as f64, b.patches as f64),
-        ),
+        (value(a).ln() + t * (value(b).ln() - value(a).ln())).exp(),
         extrapolated,
     ))
 }
 
-fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
+fn plot(rows: &[Row], peers: &[Peers], path: &Path) -> anyhow::Result<()> {
     let bounds = |f: fn(&Row) -> f64| {
         rows.iter()
             .map(f)
@@ -325,8 +435,29 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
                 (lo.min(v), hi.max(v))
             })
     };
-    let (t_lo, t_hi) = bounds(|r| r.seconds[3]);
-    let (e_lo, e_hi) = bounds(|r| r.error.smooth.rms.max(1e-6));
+    let peer_points: Vec<(&str, Vec<(f64, f64)>)> = peers
+        .iter()
+        .map(|p| {
+            let system = p.rows.first().map_or("peer", |r| r.system.as_str());
+            (
+                system,
+                p.rows.iter().map(|r| (r.seconds, r.smooth_rms)).collect(),
+            )
+        })
+        .collect();
+    let widen = |(lo, hi): (f64, f64), values: &mut dyn Iterator<Item = f64>| {
+        values.fold((lo, hi), |(lo, hi), v| (lo.min(v), hi.max(v)))
+    };
+    let all_peers = || {
+        peer_points
+            .iter()
+            .flat_map(|(_, points)| points.iter().copied())
+    };
+    let (t_lo, t_hi) = widen(bounds(|r| r.seconds[3]), &mut all_peers().map(|p| p.0));
+    let (e_lo, e_hi) = widen(
+        bounds(|r| r.error.smooth.rms.max(1e-6)),
+        &mut all_peers().map(|p| p.1),
+    );
     let root = SVGBackend::new(path, (960, 640)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
@@ -409,6 +540,17 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
             .draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?
             .label(format!("Pareto front, {scene} ({marker})"))
             .legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], BLACK));
+    }
+    for (system, points) in &peer_points {
+        chart
+            .draw_series(LineSeries::new(points.clone(), BLACK.stroke_width(2)))?
+            .label(format!("{system} (peer, 1 thread; crosses)"))
+            .legend(|(x, y)| Cross::new((x, y), 5, BLACK.stroke_width(2)));
+        chart.draw_series(
+            points
+                .iter()
+                .map(|p| Cross::new(*p, 6, BLACK.stroke_width(2))),
+        )?;
     }
     chart
         .configure_series_labels()

@@ -90,6 +90,10 @@ enum Command {
         /// Folder for the --error table and plot.
         #[arg(long, default_value = "docs")]
         out_dir: PathBuf,
+        /// Another system's measured rows to compare against at equal error (JSON, as
+        /// docs/peers/cornell-box.json); repeatable.
+        #[arg(long)]
+        peers: Vec<PathBuf>,
         /// File stem of the --error table and plot (`<out-dir>/<name>.md` and `.svg`).
         #[arg(long, default_value = "speed-vs-error")]
         name: String,
@@ -288,6 +292,7 @@ fn main() -> anyhow::Result<()> {
             sweep_error,
             out_dir,
             name,
+            peers,
             ..
         } => {
             let list = |values: &[String]| values.join(",");
@@ -296,6 +301,9 @@ fn main() -> anyhow::Result<()> {
             } else {
                 format!(" --name {name}")
             };
+            let named = peers
+                .iter()
+                .fold(named, |text, p| format!("{text} --peers {}", p.display()));
             let command = format!(
                 "radcast bench --error {} --counts {} --sweep-rays {} --sweep-error {} --repeat {repeat}{named}",
                 scenes
@@ -329,6 +337,7 @@ fn main() -> anyhow::Result<()> {
                 repeat.max(1),
                 (&out_dir, &name),
                 &command,
+                &peers,
             )?;
         }
         Command::Bench {
