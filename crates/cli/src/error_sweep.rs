@@ -50,14 +50,23 @@ pub fn load_reference(scene: &Path) -> anyhow::Result<Reference> {
         .with_context(|| format!("{}: not a radcast reference", path.display()))
 }
 
+/// The configurations a sweep runs.
+pub struct Sweep<'a> {
+    /// Dense patch counts.
+    pub counts: &'a [usize],
+    /// Shadow rays per far pair for the dense runs.
+    pub rays: &'a [u32],
+    /// Hierarchical error knobs.
+    pub errors: &'a [f64],
+    /// Runs per configuration (the table shows medians).
+    pub repeat: usize,
+}
+
 /// Runs the sweep and writes `<out_dir>/<name>.{md,svg}`: dense GMRES at each count and ray
 /// setting, the other solvers at the middle count, and the hierarchical path at each knob.
 pub fn run(
     scenes: &[PathBuf],
-    counts: &[usize],
-    rays: &[u32],
-    errors: &[f64],
-    repeat: usize,
+    sweep: &Sweep,
     (out_dir, name): (&Path, &str),
     command: &str,
     peer_files: &[PathBuf],
@@ -75,6 +84,12 @@ pub fn run(
         let start = Instant::now();
         let scene = Scene::load_obj(scene_path)?;
         let load = start.elapsed().as_secs_f64();
+        let Sweep {
+            counts,
+            rays,
+            errors,
+            repeat,
+        } = *sweep;
         let middle = counts[counts.len() / 2];
         let dense = |count: usize, method: Method, rays_per_pair: u32| SolveRequest {
             patches: PatchTarget::Count(count),

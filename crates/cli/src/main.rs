@@ -331,10 +331,12 @@ fn main() -> anyhow::Result<()> {
             );
             error_sweep::run(
                 &scenes,
-                &counts,
-                &sweep_rays,
-                &sweep_error,
-                repeat.max(1),
+                &error_sweep::Sweep {
+                    counts: &counts,
+                    rays: &sweep_rays,
+                    errors: &sweep_error,
+                    repeat: repeat.max(1),
+                },
                 (&out_dir, &name),
                 &command,
                 &peers,
