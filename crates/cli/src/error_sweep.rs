@@ -231,7 +231,7 @@ impl Peers {
     fn comparison(&self, rows: &[Row]) -> anyhow::Result<String> {
         let mut ours: Vec<&Row> = rows
             .iter()
-            .filter(|r| r.scene == self.scene && r.method.starts_with("hierarchical"))
+            .filter(|r| r.scene == self.scene && r.method.starts_with("hierarchical") && r.pareto)
             .collect();
         ours.sort_by_key(|r| r.patches);
         let mut out = String::new();
@@ -244,7 +244,7 @@ impl Peers {
         writeln!(out, "Peer rows: {}.\n", self.source)?;
         writeln!(
             out,
-            "radcast's hierarchical seconds at the peer's error, interpolated log-log between the hierarchical rows above that bracket it (~: extrapolated from the nearest two); a ratio above 1 means radcast is faster.\n"
+            "radcast's hierarchical seconds at the peer's error, interpolated log-log between the hierarchical rows of the front above that bracket it; a ratio above 1 means radcast is faster.\n"
         )?;
         writeln!(
             out,
@@ -257,13 +257,8 @@ impl Peers {
         for p in &self.rows {
             let at =
                 |target: f64, reading: fn(&Row) -> f64| match seconds_at(&ours, target, reading) {
-                    Some((seconds, extrapolated)) => format!(
-                        "{}{seconds:.3} | {}{:.1}×",
-                        if extrapolated { "~" } else { "" },
-                        if extrapolated { "~" } else { "" },
-                        p.seconds / seconds
-                    ),
-                    None => "– | –".into(),
+                    Some((seconds, false)) => format!("{seconds:.3} | {:.1}×", p.seconds / seconds),
+                    _ => "outside the rows above | –".into(),
                 };
             writeln!(
                 out,

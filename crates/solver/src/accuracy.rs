@@ -6,6 +6,7 @@
 //! Only probes on non-emitting faces count: an emitter's own emission is exact and would
 //! swamp the comparison.
 
+use crate::geometry::fan_weights;
 use crate::mesh::Mesh;
 use crate::reference::Probe;
 use crate::scene::{Rgb, Scene};
@@ -43,19 +44,6 @@ struct Located {
     smooth: Rgb,
 }
 
-/// Barycentric coordinates of `p` (in the plane) in triangle `a, b, c`.
-fn barycentric(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
-    let (v0, v1, v2) = (b - a, c - a, p - a);
-    let (d00, d01, d11, d20, d21) = (v0.dot(v0), v0.dot(v1), v1.dot(v1), v2.dot(v0), v2.dot(v1));
-    let denominator = d00 * d11 - d01 * d01;
-    if denominator == 0.0 {
-        return [1.0, 0.0, 0.0];
-    }
-    let v = (d11 * d20 - d01 * d21) / denominator;
-    let w = (d00 * d21 - d01 * d20) / denominator;
-    [1.0 - v - w, v, w]
-}
-
 fn locate(mesh: &Mesh, corners: &[Rgb], faces: &[Range<usize>], probe: &Probe) -> Located {
     let p = DVec3::from(probe.position);
     // The fan triangle that holds p best: the largest smallest barycentric (inside when >= 0).
@@ -63,19 +51,14 @@ fn locate(mesh: &Mesh, corners: &[Rgb], faces: &[Range<usize>], probe: &Probe) -
     for index in faces[probe.face as usize].clone() {
         let patch = &mesh.patches[index];
         let ids = &patch.corners[..patch.corner_count()];
-        for k in 1..ids.len() - 1 {
-            let tri = [ids[0], ids[k], ids[k + 1]];
-            let weights = barycentric(
-                p,
-                mesh.positions[tri[0] as usize],
-                mesh.positions[tri[1] as usize],
-                mesh.positions[tri[2] as usize],
-            );
-            let inside = weights.iter().cloned().fold(f64::INFINITY, f64::min);
-            if inside > best.0 {
-                let smooth = (0..3).map(|i| corners[tri[i] as usize] * weights[i]).sum();
-                best = (inside, index, smooth);
-            }
+        let positions: Vec<DVec3> = ids.iter().map(|&c| mesh.positions[c as usize]).collect();
+        let (k, weights, inside) = fan_weights(&positions, p);
+        if inside > best.0 {
+            let triangle = [ids[0], ids[k], ids[k + 1]];
+            let smooth = (0..3)
+                .map(|i| corners[triangle[i] as usize] * weights[i])
+                .sum();
+            best = (inside, index, smooth);
         }
     }
     Located {

@@ -591,6 +591,18 @@ mod tests {
         // Each response is solved to the tolerance (relative 1e-6); B ~ 10 here.
         assert!(worst < 1e-4, "worst difference {worst}");
         assert!(report.converged);
+        // The vertices too: their direct light follows the edited emission (an emitter turned
+        // off gathers nothing, as in a scene where it never emitted).
+        let worst_vertex = live
+            .vertex_radiosity()
+            .iter()
+            .zip(fresh.vertex_radiosity())
+            .map(|(a, b)| (*a - b).abs().max_element())
+            .fold(0.0, f64::max);
+        assert!(
+            worst_vertex < 1e-4,
+            "worst vertex difference {worst_vertex}"
+        );
         // The floor at (3, 0, 1) and an unlit ceiling: no green left, up to the tolerance of the
         // responses that cancelled it.
         assert!(live.radiosity().iter().all(|b| b.y < 1e-5));
