@@ -162,10 +162,9 @@ fn normalise_row(
         *value = r as f32;
         sum += r;
     }
-    let scale = if sum > 0.0 && occluders.sees_closed_view(&patches[i], i) {
-        1.0 / sum
-    } else {
-        1.0
+    let scale = match occluders.closed_view_share(&patches[i], i) {
+        Some(share) if sum > 0.0 => share / sum,
+        _ => 1.0,
     };
     if scale != 1.0 {
         row.iter_mut()
@@ -359,10 +358,9 @@ impl DenseFormFactors {
                         .iter()
                         .map(|(j, raw)| raw - row[*j] as f64 / *scale)
                         .sum::<f64>();
-                let new_scale = if raw_sum > 0.0 && occluders.sees_closed_view(&patches[i], i) {
-                    1.0 / raw_sum
-                } else {
-                    1.0
+                let new_scale = match occluders.closed_view_share(&patches[i], i) {
+                    Some(share) if raw_sum > 0.0 => share / raw_sum,
+                    _ => 1.0,
                 };
                 if new_scale == 1.0 && *scale == 1.0 {
                     updates.iter().for_each(|(j, raw)| row[*j] = *raw as f32);

@@ -205,22 +205,32 @@ impl Occluders {
         })
     }
 
-    /// Whether every one of [`CLOSURE_RAYS`] cosine-distributed rays from stratified points of the
-    /// patch meets the front of some face: then all the light leaving it lands on a patch, and its
-    /// row must sum to one however coarsely visibility was sampled. Rays that escape or meet a back
-    /// face mean the view is open, and the row is left as computed, unless they start from a
-    /// buried point ([`Occluders::is_buried`]: under a box standing on the patch), which no light
-    /// reaches or leaves: a floor with a box on it is as closed as the room around it.
-    pub fn sees_closed_view(&self, p: &Patch, index: usize) -> bool {
+    /// The share of the patch that light reaches, when its view is closed: every one of
+    /// [`CLOSURE_RAYS`] cosine-distributed rays from stratified points of the patch meets the
+    /// front of some face, unless it starts from a buried point ([`Occluders::is_buried`]: under
+    /// a box standing on the patch), which no light reaches or leaves. Then all the light the
+    /// reached part gathers comes from surfaces, and the patch's row must sum to that share
+    /// however coarsely visibility was sampled. `None` when a ray from a reached point escapes
+    /// or meets a back face: the view is open, and the row is left as computed.
+    pub fn closed_view_share(&self, p: &Patch, index: usize) -> Option<f64> {
         let seed = splitmix64(index as u64 ^ 0xC105_ED00);
-        (0..CLOSURE_RAYS).all(|k| {
+        let mut buried = 0;
+        for k in 0..CLOSURE_RAYS {
             let (u, v) = stratified_uv(k, seed);
             let (s, t) = stratified_uv(k, splitmix64(seed));
             let origin = p.polygon.point_at(u, v);
-            self.closest_hit(origin, cosine_direction(p.normal, s, t), p.face)
-                .is_some_and(|hit| hit.front)
-                || self.is_buried(origin, p.normal, p.face, seed ^ k as u64)
-        })
+            let seen = self
+                .closest_hit(origin, cosine_direction(p.normal, s, t), p.face)
+                .is_some_and(|hit| hit.front);
+            if seen {
+                continue;
+            }
+            if !self.is_buried(origin, p.normal, p.face, seed ^ k as u64) {
+                return None;
+            }
+            buried += 1;
+        }
+        Some(1.0 - buried as f64 / CLOSURE_RAYS as f64)
     }
 
     /// Whether point `x` of face `face` (front normal `normal`) is buried: every one of

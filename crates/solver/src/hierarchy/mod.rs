@@ -225,7 +225,11 @@ impl Hierarchy {
             .face_node
             .par_iter()
             .enumerate()
-            .map(|(face, &n)| occluders.sees_closed_view(tree.element_patch(n), face))
+            .map(|(face, &n)| {
+                occluders
+                    .closed_view_share(tree.element_patch(n), face)
+                    .is_some()
+            })
             .collect();
         tree.index(occluders);
         let run = Rounds {

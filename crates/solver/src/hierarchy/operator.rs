@@ -162,14 +162,15 @@ impl Hierarchy {
         self.offsets = offsets;
         self.incoming = incoming;
         // Row sums: what each leaf gathers when every radiosity is one. A leaf of a face whose
-        // view is closed sends all its light to surfaces, so its row must sum to one.
+        // view is closed sends all its light to surfaces, so its row must sum to the share of
+        // it that light reaches (one, but where a box stands on it).
         self.row_scale = vec![1.0; self.leaves.len()];
         let mut sums = vec![Rgb::ZERO; self.leaves.len()];
         self.gather(&vec![Rgb::ONE; self.leaves.len()], &mut sums);
         for (i, &leaf) in self.leaves.iter().enumerate() {
             let face = self.element_patch(leaf).face;
             if self.face_closed[face as usize] && sums[i].x > 0.0 {
-                self.row_scale[i] = 1.0 / sums[i].x;
+                self.row_scale[i] = self.seen_share[leaf as usize] / sums[i].x;
             }
         }
     }
