@@ -39,6 +39,7 @@ struct RayBudget {
     first: u32,
     penumbra: u32,
 }
+
 /// Emitting faces beyond which corners gather none (their patches' values are averaged, as
 /// without a gather): corners times emitters times rays would outgrow the solve itself.
 pub const MAX_GATHERED_EMITTERS: usize = 256;
@@ -69,20 +70,9 @@ struct Corner {
     limit: DVec3,
     normal: DVec3,
     face: u32,
-    /// Up to four points, each just inside one patch that uses the corner: rays start from
-    /// them in turn, so a corner on a contact line sees the mean of both sides.
+    /// Up to four points, each [`INSET`] of the way into one patch that uses the corner: rays
+    /// start from them in turn, so a corner on a contact line sees the mean of both sides.
     insides: Vec<DVec3>,
-}
-
-/// Whether corners gather the direct light of `scene`: it has at most
-/// [`MAX_GATHERED_EMITTERS`] emitting faces.
-pub fn gathers_direct(scene: &Scene) -> bool {
-    scene
-        .faces
-        .iter()
-        .filter(|f| f.emission.max_element() > 0.0)
-        .count()
-        <= MAX_GATHERED_EMITTERS
 }
 
 /// What a mesh's corners receive straight from the emitters, and which patches around each
@@ -96,8 +86,9 @@ pub struct CornerLight {
     /// Whether direct light is gathered at the corners (at most [`MAX_GATHERED_EMITTERS`]
     /// emitting faces); if not, corners average their patches' whole reflected radiosity.
     gathered: bool,
-    /// Per patch and corner slot: whether light reaches the patch just inside that corner
-    /// (false under a box standing on the floor: [`Occluders::is_buried`]).
+    /// Per patch and corner slot: whether light reaches the patch at the point [`INSET`] of the
+    /// way in from that corner (not under a box standing on the floor:
+    /// [`Occluders::is_buried`]).
     reached: Vec<[bool; 4]>,
 }
 
@@ -116,7 +107,7 @@ impl CornerLight {
                 brightness: f.emission.max_element(),
             })
             .collect();
-        let gathered = gathers_direct(scene);
+        let gathered = emitters.len() <= MAX_GATHERED_EMITTERS;
         let corners = corners_of(mesh);
         let per_corner: Vec<Vec<(u32, f32)>> = corners
             .par_iter()
