@@ -233,6 +233,8 @@ fn main() -> anyhow::Result<()> {
                 "--probes must be at least 1 and --samples at least 2"
             );
             let scene = Scene::load_obj(&path)?;
+            // Before minutes of tracing, not after.
+            create_parent(&out)?;
             let occluders = Occluders::new(&scene);
             let printer = ProgressPrinter::new();
             let placed = place_probes(&scene, probes, seed);
@@ -265,10 +267,7 @@ fn main() -> anyhow::Result<()> {
                 .and_then(|n| n.to_str())
                 .context("--out needs a file name")?;
             let scene = solver::generate::furnished_room(pieces, seed, mtl_name);
-            if let Some(folder) = out.parent().filter(|f| !f.as_os_str().is_empty()) {
-                std::fs::create_dir_all(folder)
-                    .with_context(|| format!("{}: cannot create", folder.display()))?;
-            }
+            create_parent(&out)?;
             std::fs::write(&out, &scene.obj)
                 .with_context(|| format!("{}: cannot write", out.display()))?;
             std::fs::write(&mtl_path, &scene.mtl)
@@ -454,6 +453,15 @@ fn bench(
             "| {} | {load:.4} | {mesh:.4} | {ff:.4} | {solve:.4} | {total:.4} | {} | {} |",
             last.patches, last.iterations, last.rays
         );
+    }
+    Ok(())
+}
+
+/// Creates the folder `path` is to be written in, if it names one.
+fn create_parent(path: &std::path::Path) -> anyhow::Result<()> {
+    if let Some(folder) = path.parent().filter(|f| !f.as_os_str().is_empty()) {
+        std::fs::create_dir_all(folder)
+            .with_context(|| format!("{}: cannot create", folder.display()))?;
     }
     Ok(())
 }

@@ -139,6 +139,31 @@ fn hierarchical_json_adds_elements_links_and_peak_memory() {
 }
 
 #[test]
+fn reference_writes_into_a_folder_it_creates() {
+    let folder = std::env::temp_dir().join(format!("radcast-reference-{}", std::process::id()));
+    let out = folder.join("new").join("slab.json");
+    let output = radcast(&[
+        "reference",
+        "scenes/shadow-slab.obj",
+        "--probes",
+        "3",
+        "--samples",
+        "16",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(written["probes"].as_array().map(Vec::len), Some(3));
+    std::fs::remove_dir_all(&folder).unwrap();
+}
+
+#[test]
 fn generate_writes_a_room_that_loads() {
     let folder = std::env::temp_dir().join(format!("radcast-generate-{}", std::process::id()));
     let out = folder.join("room.obj");
