@@ -10,11 +10,17 @@ fn radcast(args: &[&str]) -> std::process::Output {
         .expect("radcast runs")
 }
 
-/// Runs a command that must succeed and print one JSON object; returns it and the stderr text.
-fn radcast_json(args: &[&str]) -> (serde_json::Value, String) {
+/// Runs a command that must succeed; returns its output, with the stderr text.
+fn radcast_ok(args: &[&str]) -> (std::process::Output, String) {
     let output = radcast(args);
     let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
     assert!(output.status.success(), "{stderr}");
+    (output, stderr)
+}
+
+/// Runs a command that must succeed and print one JSON object; returns it and the stderr text.
+fn radcast_json(args: &[&str]) -> (serde_json::Value, String) {
+    let (output, stderr) = radcast_ok(args);
     (
         serde_json::from_slice(&output.stdout).expect("one JSON object on stdout"),
         stderr,
@@ -142,7 +148,7 @@ fn hierarchical_json_adds_elements_links_and_peak_memory() {
 fn reference_writes_into_a_folder_it_creates() {
     let folder = std::env::temp_dir().join(format!("radcast-reference-{}", std::process::id()));
     let out = folder.join("new").join("slab.json");
-    let output = radcast(&[
+    radcast_ok(&[
         "reference",
         "scenes/shadow-slab.obj",
         "--probes",
@@ -152,11 +158,6 @@ fn reference_writes_into_a_folder_it_creates() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
     let written: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(written["probes"].as_array().map(Vec::len), Some(3));
@@ -167,7 +168,7 @@ fn reference_writes_into_a_folder_it_creates() {
 fn generate_writes_a_room_that_loads() {
     let folder = std::env::temp_dir().join(format!("radcast-generate-{}", std::process::id()));
     let out = folder.join("room.obj");
-    let output = radcast(&[
+    let (_, stderr) = radcast_ok(&[
         "generate",
         "--pieces",
         "30",
@@ -176,12 +177,6 @@ fn generate_writes_a_room_that_loads() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let stderr = String::from_utf8_lossy(&output.stderr);
     // 30 pieces, floor, ceiling, walls and one lamp per 4 m of a 10.25 m square ceiling (3 x 3).
     assert!(stderr.contains(": 42 objects,"), "{stderr}");
     assert!(folder.join("room.mtl").exists());
@@ -204,7 +199,7 @@ fn bench_error_writes_its_table_and_plot_under_the_given_name() {
         "--repeat",
         "1",
     ];
-    let output = radcast(
+    radcast_ok(
         &[
             &args[..],
             &[
@@ -215,11 +210,6 @@ fn bench_error_writes_its_table_and_plot_under_the_given_name() {
             ],
         ]
         .concat(),
-    );
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
     );
     let table =
         std::fs::read_to_string(folder.join("slab-check.md")).expect("the table is written");
