@@ -199,3 +199,37 @@ fn a_view_line_is_parsed_and_a_bad_one_names_its_line() {
         )
     );
 }
+
+#[test]
+fn a_colour_without_three_numbers_names_its_mtl_line() {
+    // tobj panicked on these: truncated files end like this.
+    let obj = format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 3\n");
+    for (bad, found) in [
+        ("newmtl white\nKd 0.5 0.5\n", "Kd 0.5 0.5"),
+        ("newmtl white\nKd 0.5 0.5 0.5\nKe\n", "Ke"),
+        ("newmtl white\nKd 0.5 zero 0.5\n", "Kd 0.5 zero 0.5"),
+    ] {
+        let (error, path) = error_of(&obj, Some(bad));
+        let line = bad.lines().position(|l| l == found).unwrap() + 1;
+        let expected = format!(
+            "{}:{line}: {} needs three numbers (r g b), found '{found}'",
+            path.with_extension("mtl").display(),
+            &found[..2]
+        );
+        assert_eq!(error, expected);
+    }
+}
+
+#[test]
+fn a_scene_or_material_file_that_is_not_a_file_is_refused_unread() {
+    // A device would be read until memory runs out.
+    let (error, _) = error_of(
+        &format!("mtllib /dev/zero\no a\nusemtl white\n{SQUARE}f 1 2 3\n"),
+        None,
+    );
+    assert_eq!(error, "/dev/zero: not a regular file");
+    let error = Scene::load_obj(Path::new("/dev/zero"))
+        .expect_err("a device")
+        .to_string();
+    assert_eq!(error, "/dev/zero: not a regular file");
+}

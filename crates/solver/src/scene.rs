@@ -264,10 +264,7 @@ impl Scene {
 
     /// Loads an OBJ file and the MTL libraries it names (relative to the OBJ's folder).
     pub fn load_obj(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
-            path: path.into(),
-            source,
-        })?;
+        let text = read_scene_file(path)?;
         let folder = path.parent().unwrap_or(Path::new("."));
         let mtl_failure = std::cell::RefCell::new(None);
         let options = tobj::LoadOptions {
@@ -278,17 +275,21 @@ impl Scene {
         };
         let loaded = tobj::load_obj_buf(&mut text.as_bytes(), &options, |mtl| {
             let mtl_path = folder.join(mtl);
-            let result = tobj::load_mtl(&mtl_path);
-            if result.is_err() {
-                *mtl_failure.borrow_mut() = Some(mtl_path);
-            }
-            result
+            // Read and checked here, never by tobj: it panics on a colour line with fewer than
+            // three numbers and reads whatever the path names (`/dev/zero`) to the end.
+            read_scene_file(&mtl_path)
+                .and_then(|text| lint_mtl(&mtl_path, &text).map(|()| text))
+                .map_err(|error| {
+                    *mtl_failure.borrow_mut() = Some(error);
+                    tobj::LoadError::OpenFileFailed
+                })
+                .and_then(|text| tobj::load_mtl_buf(&mut text.as_bytes()))
         });
         // Check lines first: our messages name the line, tobj's do not.
         let (models, materials) = match loaded {
             Ok((models, materials)) => {
-                if let Some(mtl_path) = mtl_failure.take() {
-                    return Err(mtl_error(&mtl_path));
+                if let Some(error) = mtl_failure.take() {
+                    return Err(error);
                 }
                 let materials = materials.map_err(|e| SceneError::Parse {
                     path: path.into(),
@@ -298,6 +299,9 @@ impl Scene {
                 (models, materials)
             }
             Err(e) => {
+                if let Some(error) = mtl_failure.take() {
+                    return Err(error);
+                }
                 lint_obj(path, &text, None)?;
                 return Err(SceneError::Parse {
                     path: path.into(),
@@ -375,17 +379,57 @@ impl Scene {
     }
 }
 
-fn mtl_error(mtl_path: &Path) -> SceneError {
-    match std::fs::metadata(mtl_path) {
-        Err(source) => SceneError::Io {
-            path: mtl_path.into(),
-            source,
-        },
-        Ok(_) => SceneError::Parse {
-            path: mtl_path.into(),
-            reason: "not a valid MTL file".into(),
-        },
+/// The largest scene or material file read: far past any real model, short of what a
+/// mistaken path (a device, a disk image) would make the loader swallow.
+pub const MAX_SCENE_FILE_BYTES: u64 = 4 << 30;
+
+/// Reads a scene or material file as text: a regular file of at most
+/// [`MAX_SCENE_FILE_BYTES`].
+fn read_scene_file(path: &Path) -> Result<String, SceneError> {
+    let io = |source| SceneError::Io {
+        path: path.into(),
+        source,
+    };
+    let metadata = std::fs::metadata(path).map_err(io)?;
+    let refuse = |reason: String| SceneError::Parse {
+        path: path.into(),
+        reason,
+    };
+    if !metadata.is_file() {
+        return Err(refuse("not a regular file".into()));
     }
+    if metadata.len() > MAX_SCENE_FILE_BYTES {
+        return Err(refuse(format!(
+            "{} bytes is more than a scene file may have ({MAX_SCENE_FILE_BYTES})",
+            metadata.len()
+        )));
+    }
+    std::fs::read_to_string(path).map_err(io)
+}
+
+/// Colour statements of an MTL file: each needs three numbers.
+const MTL_COLOURS: [&str; 5] = ["Ka", "Kd", "Ks", "Ke", "Tf"];
+
+/// Checks what tobj would panic on: a colour statement without three numbers.
+fn lint_mtl(path: &Path, text: &str) -> Result<(), SceneError> {
+    for (number, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let Some(keyword) = words.next().filter(|k| MTL_COLOURS.contains(k)) else {
+            continue;
+        };
+        let numbers: Vec<&str> = words.take(3).collect();
+        if numbers.len() < 3 || numbers.iter().any(|n| n.parse::<f32>().is_err()) {
+            return Err(SceneError::Line {
+                path: path.into(),
+                line: number + 1,
+                reason: format!(
+                    "{keyword} needs three numbers (r g b), found '{}'",
+                    line.trim()
+                ),
+            });
+        }
+    }
+    Ok(())
 }
 
 fn find_view(path: &Path, text: &str) -> Result<Option<View>, SceneError> {
