@@ -61,6 +61,26 @@ fn furnaces_stay_exact_with_and_without_an_occluder() {
 }
 
 #[test]
+fn scaling_the_scene_changes_neither_leaves_nor_radiosity() {
+    let scene = Scene::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
+    let base = solve(scene.clone(), 0.2);
+    for factor in [1e-14, 1e17] {
+        let scaled = solve(scene.scaled(factor), 0.2);
+        assert_eq!(
+            scaled.radiosity.len(),
+            base.radiosity.len(),
+            "scale {factor}"
+        );
+        for (a, b) in base.vertex_radiosity.iter().zip(&scaled.vertex_radiosity) {
+            assert!(
+                (*a - *b).abs().max_element() <= 1e-4 * a.max_element().max(1e-3),
+                "scale {factor}: {a} vs {b}"
+            );
+        }
+    }
+}
+
+#[test]
 fn plates_and_hinge_give_rho_f_e() {
     let (rho, emission) = (0.6, 10.0);
     let plates = solve(

@@ -1,8 +1,9 @@
 //! Shadow rays: is the segment between two surface points blocked by any other face?
 //!
 //! The occluders are the scene's input faces (not the patches), in obvhs's compressed wide BVH,
-//! chosen by measurement (docs/BENCHMARKS.md). Coordinates are re-centred on the scene before
-//! the conversion to f32, so a scene far from the origin keeps its precision.
+//! chosen by measurement (docs/BENCHMARKS.md). Coordinates are re-centred on the scene and scaled
+//! by a power of two about its size before the conversion to f32, so a scene far from the
+//! origin keeps its precision and one of any size meets the same arithmetic.
 
 use crate::mesh::Patch;
 use crate::sampling::{cosine_direction, splitmix64, stratified_uv};
@@ -68,12 +69,25 @@ enum Index {
     Linear,
 }
 
+/// Where the occluders live in f32: relative to the scene's centre, in units of a power of two
+/// about its size.
+struct Frame {
+    centre: DVec3,
+    unit: f64,
+}
+
+impl Frame {
+    fn point(&self, p: DVec3) -> Vec3A {
+        Vec3A::from(((p - self.centre) / self.unit).as_vec3())
+    }
+}
+
 /// The scene's faces, ready for segment queries.
 pub struct Occluders {
     index: Index,
     faces: Vec<OccluderFace>,
-    centre: DVec3,
-    /// Rays start this far along, relative to nothing but the scene's size.
+    frame: Frame,
+    /// Rays start this far along (in [`Frame`] units), relative to nothing but the scene's size.
     start_offset: f32,
 }
 
@@ -116,6 +130,15 @@ impl Occluders {
         let (centre, diagonal) = scene.bounds().map_or((DVec3::ZERO, 0.0), |(lo, hi)| {
             ((lo + hi) * 0.5, (hi - lo).length())
         });
+        // The power of two at or above the diagonal: exact to divide by, so the f32 arithmetic
+        // is the same at every scale, and the BVH sees coordinates within [-1, 1] (obvhs
+        // indexes out of bounds past about 1e17).
+        let unit = if diagonal.is_finite() && diagonal > 0.0 {
+            2f64.powi(diagonal.log2().ceil() as i32)
+        } else {
+            1.0
+        };
+        let frame = Frame { centre, unit };
         let faces: Vec<OccluderFace> = scene
             .faces
             .iter()
@@ -123,7 +146,7 @@ impl Occluders {
                 let c = face.polygon.corners();
                 let mut corners = [Vec3A::ZERO; 4];
                 for (slot, p) in corners.iter_mut().zip(c) {
-                    *slot = Vec3A::from((*p - centre).as_vec3());
+                    *slot = frame.point(*p);
                 }
                 OccluderFace {
                     corners,
@@ -144,8 +167,8 @@ impl Occluders {
         Occluders {
             index,
             faces,
-            centre,
-            start_offset: 1e-6 * diagonal as f32,
+            start_offset: 1e-6 * diagonal as f32 / unit as f32,
+            frame,
         }
     }
 
@@ -153,7 +176,7 @@ impl Occluders {
     /// `ignore` (the one the ray starts on).
     pub fn closest_hit(&self, origin: DVec3, direction: DVec3, ignore: u32) -> Option<Hit> {
         let ray = Ray::new(
-            Vec3A::from((origin - self.centre).as_vec3()),
+            self.frame.point(origin),
             ray_direction(direction),
             self.start_offset,
             f32::INFINITY,
@@ -200,7 +223,7 @@ impl Occluders {
         }
         (best_face != u32::MAX).then(|| Hit {
             face: best_face,
-            distance: best_t as f64,
+            distance: best_t as f64 * self.frame.unit,
             front: self.faces[best_face as usize].normal.dot(ray.direction) < 0.0,
         })
     }
@@ -250,10 +273,10 @@ impl Occluders {
     /// True when nothing but faces `ignore[0]` and `ignore[1]` (the endpoints' own faces, which a
     /// segment between two of their points cannot cross) lies between `from` and `to`.
     pub fn segment_is_clear(&self, from: DVec3, to: DVec3, ignore: [u32; 2]) -> bool {
-        let origin = Vec3A::from((from - self.centre).as_vec3());
+        let origin = self.frame.point(from);
         let ray = Ray::new(
             origin,
-            ray_direction(to - from),
+            ray_direction((to - from) / self.frame.unit),
             SEGMENT_END_MARGIN,
             1.0 - SEGMENT_END_MARGIN,
         );
