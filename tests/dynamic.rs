@@ -224,7 +224,21 @@ async fn bad_requests_are_refused_with_a_reason_and_change_nothing() {
             Some(TOKEN),
             r#"{"emission": [1, -1, 1]}"#,
             400,
-            "emission [1.0, -1.0, 1.0] must have every value finite and >= 0",
+            "emission [1.0, -1.0, 1.0] must have every value finite, >= 0 and <= 1e24",
+        ),
+        (
+            "/api/objects/light/emission",
+            Some(TOKEN),
+            r#"{"emission": [1e308, 0, 0]}"#,
+            400,
+            "emission [1e308, 0.0, 0.0] must have every value finite, >= 0 and <= 1e24",
+        ),
+        (
+            "/api/objects/short_block/transform",
+            Some(TOKEN),
+            r#"{"translate": [1e39, 0, 0]}"#,
+            400,
+            "translate [1e39, 0.0, 0.0] must have every value finite and within ±1e30",
         ),
         (
             "/api/objects/short_block/transform",

@@ -134,7 +134,12 @@ fn reflectance_outside_zero_to_one_and_negative_emission_are_refused() {
         ),
         (
             "Kd 0.5 0.5 0.5\nKe 1 -2 1",
-            "Ke [1.0, -2.0, 1.0] must have every channel finite and >= 0",
+            "Ke [1.0, -2.0, 1.0] must have every value finite, >= 0 and <= 1e24",
+        ),
+        (
+            // Radiosity past what frames hold (it turned into inf and NaN).
+            "Kd 0.5 0.5 0.5\nKe 3e38 0 0",
+            "Ke [3.0000000054977558e38, 0.0, 0.0] must have every value finite, >= 0 and <= 1e24",
         ),
     ] {
         let (error, path) = error_of(

@@ -173,14 +173,14 @@ fn refuse(status: StatusCode, reason: String) -> Response {
     response
 }
 
-/// Checks an edit: the object exists and the body is `{"FIELD": [a, b, c]}` with finite
-/// numbers (and non-negative ones when `non_negative`). Returns the triple or the reason.
+/// Checks an edit: the object exists and the body is `{"FIELD": [a, b, c]}` with values
+/// `check` accepts (the solver's rule for the field). Returns the triple or the reason.
 pub fn parse_edit(
     objects: &[String],
     name: &str,
     body: &[u8],
     field: &str,
-    non_negative: bool,
+    check: fn([f64; 3]) -> Result<(), String>,
 ) -> Result<[f64; 3], (StatusCode, String)> {
     if !objects.iter().any(|o| o == name) {
         return Err((StatusCode::NOT_FOUND, format!("no object named '{name}'")));
@@ -196,18 +196,7 @@ pub fn parse_edit(
         .get(field)
         .and_then(|v| serde_json::from_value(v.clone()).ok())
         .ok_or_else(|| (StatusCode::BAD_REQUEST, shape()))?;
-    let allowed = |c: &f64| c.is_finite() && (!non_negative || *c >= 0.0);
-    if !triple.iter().all(allowed) {
-        let rule = if non_negative {
-            "finite and >= 0"
-        } else {
-            "finite"
-        };
-        return Err((
-            StatusCode::BAD_REQUEST,
-            format!("{field} {triple:?} must have every value {rule}"),
-        ));
-    }
+    check(triple).map_err(|rule| (StatusCode::BAD_REQUEST, format!("{field} {rule}")))?;
     Ok(triple)
 }
 
@@ -218,7 +207,7 @@ fn edit(
     headers: &HeaderMap,
     body: &[u8],
     field: &str,
-    non_negative: bool,
+    check: fn([f64; 3]) -> Result<(), String>,
     queue: fn(&crate::edits::Edits, &str, [f64; 3]),
 ) -> Response {
     if !authorized(headers, &shared.token) {
@@ -232,7 +221,7 @@ fn edit(
         name,
         body,
         field,
-        non_negative,
+        check,
     ) {
         Ok(value) => {
             queue(&shared.edits, name, value);
@@ -256,7 +245,7 @@ async fn set_emission(
         &headers,
         &body,
         "emission",
-        true,
+        solver::scene::check_emission,
         crate::edits::Edits::set_emission,
     )
 }
@@ -273,7 +262,7 @@ async fn set_transform(
         &headers,
         &body,
         "translate",
-        false,
+        solver::scene::check_translation,
         crate::edits::Edits::translate,
     )
 }

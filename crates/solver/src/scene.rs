@@ -166,11 +166,45 @@ impl Material {
         if !r.iter().all(|c| c.is_finite() && (0.0..1.0).contains(c)) {
             return Err(format!("Kd {r:?} must have every channel in [0, 1)"));
         }
-        let e = self.emission.to_array();
-        if !e.iter().all(|c| c.is_finite() && *c >= 0.0) {
-            return Err(format!("Ke {e:?} must have every channel finite and >= 0"));
-        }
+        check_emission(self.emission.to_array()).map_err(|rule| format!("Ke {rule}"))
+    }
+}
+
+/// The brightest emission accepted, W/m^2. Frames hold radiosity up to about 8e34 W/m^2
+/// (RGB9E5 with a scale of at most 2^100); this leaves a million-fold headroom for reflections
+/// that multiply it (reflectance up to 0.999999), and is far past any real lamp.
+pub const MAX_EMISSION: f64 = 1e24;
+
+/// The farthest a coordinate (or a move) may reach from the origin, scene units: what f32
+/// geometry holds with room for the differences and products viewers compute.
+pub const MAX_COORDINATE: f64 = 1e30;
+
+/// Checks an emission: every channel finite, >= 0 and at most [`MAX_EMISSION`]. The reason
+/// names the value.
+pub fn check_emission(emission: [f64; 3]) -> Result<(), String> {
+    if emission
+        .iter()
+        .all(|c| c.is_finite() && (0.0..=MAX_EMISSION).contains(c))
+    {
         Ok(())
+    } else {
+        Err(format!(
+            "{emission:?} must have every value finite, >= 0 and <= {MAX_EMISSION:e}"
+        ))
+    }
+}
+
+/// Checks a translation: every component finite and at most [`MAX_COORDINATE`] in size.
+pub fn check_translation(offset: [f64; 3]) -> Result<(), String> {
+    if offset
+        .iter()
+        .all(|c| c.is_finite() && c.abs() <= MAX_COORDINATE)
+    {
+        Ok(())
+    } else {
+        Err(format!(
+            "{offset:?} must have every value finite and within ±{MAX_COORDINATE:e}"
+        ))
     }
 }
 

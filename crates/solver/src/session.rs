@@ -6,7 +6,7 @@ use crate::gather::CornerLight;
 use crate::hierarchy::{Hierarchy, HierarchyStats, Refined};
 use crate::mesh::Mesh;
 use crate::pipeline::{ObjectRadiosity, SolveError, SolveReport, SolveRequest, StageSeconds};
-use crate::scene::{Rgb, Scene};
+use crate::scene::{MAX_COORDINATE, Rgb, Scene, check_emission, check_translation};
 use crate::solve::{NeedsEntries, SolveOutcome, System, solve};
 use crate::transport::Transport;
 use crate::visibility::Occluders;
@@ -73,12 +73,13 @@ pub enum EditError {
     /// No object has that name.
     #[error("no object named '{0}'")]
     UnknownObject(String),
-    /// Emission must be finite and non-negative.
-    #[error("emission {0:?} must have every channel finite and >= 0")]
-    InvalidEmission([f64; 3]),
-    /// A translation must be finite.
-    #[error("translation {0:?} must be finite")]
-    InvalidTranslation([f64; 3]),
+    /// An emission out of range ([`crate::scene::check_emission`]).
+    #[error("emission {0}")]
+    InvalidEmission(String),
+    /// A translation out of range ([`crate::scene::check_translation`]), or one that would
+    /// take the object past [`crate::scene::MAX_COORDINATE`].
+    #[error("translation {0}")]
+    InvalidTranslation(String),
 }
 
 /// What moving an object cost.
@@ -247,8 +248,24 @@ impl Session {
     /// next [`Session::solve`] solves the moved scene in full (with the current emission).
     pub fn translate(&mut self, name: &str, offset: DVec3) -> Result<MoveReport, EditError> {
         let object = self.object_index(name)?;
-        if !offset.is_finite() {
-            return Err(EditError::InvalidTranslation(offset.to_array()));
+        check_translation(offset.to_array()).map_err(EditError::InvalidTranslation)?;
+        let reach = self
+            .scene
+            .faces
+            .iter()
+            .filter(|f| f.object == object)
+            .flat_map(|f| {
+                f.polygon
+                    .corners()
+                    .iter()
+                    .map(|c| (*c + offset).abs().max_element())
+            })
+            .fold(0.0, f64::max);
+        if reach > MAX_COORDINATE {
+            return Err(EditError::InvalidTranslation(format!(
+                "{:?} would take '{name}' {reach:e} from the origin, past {MAX_COORDINATE:e}",
+                offset.to_array()
+            )));
         }
         let clock = Instant::now();
         // The responses were for the old transport: fold the edits into the emission (of the
@@ -348,9 +365,7 @@ impl Session {
     /// Sets the emission of every patch of object `name`; [`Session::solve`] applies it.
     pub fn set_emission(&mut self, name: &str, emission: Rgb) -> Result<(), EditError> {
         let object = self.object_index(name)?;
-        if !emission.is_finite() || emission.min_element() < 0.0 {
-            return Err(EditError::InvalidEmission(emission.to_array()));
-        }
+        check_emission(emission.to_array()).map_err(EditError::InvalidEmission)?;
         self.edited.insert(object, emission);
         Ok(())
     }
@@ -622,17 +637,35 @@ mod tests {
             Rgb::new(1.0, f64::NAN, 0.0),
             Rgb::splat(-1.0),
             Rgb::splat(f64::INFINITY),
+            Rgb::splat(1e308),
+            Rgb::new(0.0, 3e38, 0.0),
         ] {
             assert!(matches!(
                 live.set_emission("floor", bad),
                 Err(EditError::InvalidEmission(_))
             ));
         }
-        assert!(matches!(
-            live.translate("floor", DVec3::new(0.0, f64::NAN, 0.0)),
-            Err(EditError::InvalidTranslation(_))
-        ));
+        for bad in [DVec3::new(0.0, f64::NAN, 0.0), DVec3::new(1e39, 0.0, 0.0)] {
+            assert!(matches!(
+                live.translate("floor", bad),
+                Err(EditError::InvalidTranslation(_))
+            ));
+        }
+
         live.solve(&no_progress);
         assert_eq!(live.radiosity(), &before[..]);
+    }
+
+    #[test]
+    fn a_move_may_not_carry_an_object_past_what_f32_geometry_holds() {
+        let mut live = session(&two_lamp_box());
+        let far = DVec3::new(1e30, 0.0, 0.0);
+        assert!(live.translate("floor", far).is_ok(), "up to the bound");
+        assert_eq!(
+            live.translate("floor", far),
+            Err(EditError::InvalidTranslation(
+                "[1e30, 0.0, 0.0] would take 'floor' 2e30 from the origin, past 1e30".into()
+            ))
+        );
     }
 }
