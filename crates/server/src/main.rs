@@ -81,10 +81,14 @@ async fn main() -> anyhow::Result<()> {
         ..Limits::default()
     };
     let prepared = prepare(&args.scene, request)?;
-    let token = match args.token {
-        Some(token) if !token.is_empty() => token,
+    // A token the operator chose is theirs to know: only a made-up one is shown.
+    let (token, shown) = match args.token {
+        Some(token) if !token.is_empty() => (token, "$RADCAST_TOKEN".to_string()),
         Some(_) => anyhow::bail!("--token must not be empty"),
-        None => random_token()?,
+        None => {
+            let token = random_token()?;
+            (token.clone(), token)
+        }
     };
     let shared = shared_for(&prepared, limits, token.clone());
     let listener = tokio::net::TcpListener::bind(&args.addr)
@@ -92,7 +96,7 @@ async fn main() -> anyhow::Result<()> {
         .with_context(|| format!("cannot listen on {}", args.addr))?;
     let address = listener.local_addr()?;
     println!(
-        "radcast-server: {} ({} patches) on http://{address}\n  viewers: radcast-client view --url ws://{address}/ws --out view.png\n  control: curl -X PUT -H 'Authorization: Bearer {token}' -d '{{\"emission\": [17, 12, 4]}}' http://{address}/api/objects/NAME/emission",
+        "radcast-server: {} ({} patches) on http://{address}\n  viewers: radcast-client view --url ws://{address}/ws --out view.png\n  control: curl -X PUT -H \"Authorization: Bearer {shown}\" -d '{{\"emission\": [17, 12, 4]}}' http://{address}/api/objects/NAME/emission",
         args.scene.display(),
         prepared.mesh.patches.len()
     );
