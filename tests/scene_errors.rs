@@ -190,19 +190,27 @@ fn a_view_line_is_parsed_and_a_bad_one_names_its_line() {
     let (scene, _, _folder) = load(&obj, Some(MTL));
     let view = scene.expect("loads").view.expect("has a view");
     assert_eq!((view.eye.z, view.vertical_fov_degrees), (-5.0, 40.0));
-    let (error, path) = error_of(
-        &format!(
-            "mtllib scene.mtl\n#@view eye 0 1 -5 target 0 1 0 up 0 1 0 fov 400\no a\nusemtl white\n{SQUARE}f 1 2 3\n"
+    let needs =
+        "the view needs eye != target, an up not along the view direction and a fov in (0, 180)";
+    for (view, reason) in [
+        (
+            "eye 0 1 -5 target 0 1 0 up 0 1 0 fov 400",
+            needs.to_string(),
         ),
-        Some(MTL),
-    );
-    assert_eq!(
-        error,
-        format!(
-            "{}:2: the view needs eye != target, a non-zero up and a fov in (0, 180)",
-            path.display()
-        )
-    );
+        // Looking straight along the up direction: no camera frame.
+        ("eye 0 -5 0 target 0 1 0 up 0 1 0 fov 40", needs.to_string()),
+        // Past what f32 viewers hold (a camera at 1e308 was accepted).
+        (
+            "eye 1e308 1 -5 target 0 1 0 up 0 1 0 fov 40",
+            "expected a finite number within ±1e30 at word 2".to_string(),
+        ),
+    ] {
+        let (error, path) = error_of(
+            &format!("mtllib scene.mtl\n#@view {view}\no a\nusemtl white\n{SQUARE}f 1 2 3\n"),
+            Some(MTL),
+        );
+        assert_eq!(error, format!("{}:2: {reason}", path.display()));
+    }
 }
 
 #[test]

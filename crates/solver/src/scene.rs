@@ -104,8 +104,13 @@ impl View {
         let number = |i: usize| -> Result<f64, String> {
             w.get(i)
                 .and_then(|s| s.parse::<f64>().ok())
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| format!("expected a finite number at word {}", i + 1))
+                .filter(|x| x.abs() <= MAX_COORDINATE)
+                .ok_or_else(|| {
+                    format!(
+                        "expected a finite number within ±{MAX_COORDINATE:e} at word {}",
+                        i + 1
+                    )
+                })
         };
         let vector = |label: &str, at: usize| -> Result<DVec3, String> {
             if w.get(at) != Some(&label) {
@@ -122,11 +127,17 @@ impl View {
             return Err("expected `#@view eye X Y Z target X Y Z up X Y Z fov DEGREES`".into());
         }
         let vertical_fov_degrees = number(13)?;
+        // Viewers build a camera frame from these in f32: the direction and up must stay
+        // apart there, not only in f64.
+        let (forward, up_f32) = ((target - eye).as_vec3(), up.as_vec3());
         if !(vertical_fov_degrees > 0.0 && vertical_fov_degrees < 180.0)
-            || eye == target
-            || up == DVec3::ZERO
+            || forward.normalize_or_zero() == glam::Vec3::ZERO
+            || forward.cross(up_f32).normalize_or_zero() == glam::Vec3::ZERO
         {
-            return Err("the view needs eye != target, a non-zero up and a fov in (0, 180)".into());
+            return Err(
+                "the view needs eye != target, an up not along the view direction and a fov in (0, 180)"
+                    .into(),
+            );
         }
         Ok(View {
             eye,
