@@ -9,6 +9,20 @@ use client::{fetch_geometry, fetch_solution, http_base};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+/// Writes a line to stdout. A reader that went away (`radcast-client watch | head -1`) ends the
+/// program quietly instead of with a panic; other write errors are returned.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(error) = writeln!(std::io::stdout(), $($arg)*) {
+            if error.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+            return Err(error.into());
+        }
+    }};
+}
+
 /// Headless viewers for radcast-server.
 #[derive(Parser)]
 #[command(version, about)]
@@ -255,25 +269,31 @@ async fn load(
         .map(|(a, b)| 100.0 * (b - a) / started.elapsed().as_secs_f64());
     let report = client::load::summarize(stats, metrics, cpu, &edit_times);
     if json {
-        println!("{}", serde_json::to_string(&report)?);
+        say!("{}", serde_json::to_string(&report)?);
     } else {
         let l = report.latency_ms;
-        println!(
+        say!(
             "viewers   {} asked, {} connected, {} failed {:?}",
-            report.clients, report.connected, report.failed, report.failures
+            report.clients,
+            report.connected,
+            report.failed,
+            report.failures
         );
-        println!(
+        say!(
             "connect   p50 {:.1} ms, p99 {:.1} ms; first frame p50 {:.1} ms, p99 {:.1} ms",
             report.connect_ms.p50,
             report.connect_ms.p99,
             report.first_frame_ms.p50,
             report.first_frame_ms.p99
         );
-        println!(
+        say!(
             "latency   p50 {:.1} ms, p90 {:.1} ms, p99 {:.1} ms, max {:.1} ms",
-            l.p50, l.p90, l.p99, l.max
+            l.p50,
+            l.p90,
+            l.p99,
+            l.max
         );
-        println!(
+        say!(
             "traffic   {} frames, {} bytes; per viewer {}..{} frames; {} resyncs",
             report.frames,
             report.bytes,
@@ -285,7 +305,7 @@ async fn load(
             let e = &report.edit_to_last_viewer_ms;
             let mut sorted = e.clone();
             sorted.sort_by(f64::total_cmp);
-            println!(
+            say!(
                 "edits     {} edits, PUT to last viewer: median {:.1} ms, max {:.1} ms",
                 e.len(),
                 sorted[sorted.len() / 2],
@@ -293,14 +313,14 @@ async fn load(
             );
         }
         if let Some(cpu) = report.load_tester_cpu_percent {
-            println!("tester    {cpu:.0}% CPU (of one core) in this process");
+            say!("tester    {cpu:.0}% CPU (of one core) in this process");
         }
         for (name, value) in report
             .server
             .iter()
             .filter(|(n, _)| !n.starts_with("radcast_solve"))
         {
-            println!("server    {name} {value}");
+            say!("server    {name} {value}");
         }
     }
     Ok(())
@@ -328,14 +348,16 @@ async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> any
         let data = data?;
         let (full, changed, info) = match viewer.receive(&data)? {
             Step::Hello(hello) => {
-                println!(
+                say!(
                     "hello: scene {:016x}, {} vertices, protocol {}",
-                    hello.scene_id, hello.vertex_count, hello.protocol_version
+                    hello.scene_id,
+                    hello.vertex_count,
+                    hello.protocol_version
                 );
                 continue;
             }
             Step::GeometryChanged { geometry_version } => {
-                println!("geometry changed: version {geometry_version}");
+                say!("geometry changed: version {geometry_version}");
                 if geometry.is_some() {
                     geometry = Some(fetch().await??);
                 }
@@ -353,7 +375,7 @@ async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> any
         };
         let latency_ms =
             wire::unix_micros_now().saturating_sub(info.sent_at_unix_micros) as f64 / 1e3;
-        println!(
+        say!(
             "version {}: {}, {changed} vertices changed, {} bytes, latency {latency_ms:.1} ms{}",
             info.solution_version,
             if full { "full" } else { "delta" },
@@ -438,7 +460,7 @@ async fn view(
             "MISMATCH"
         };
         mismatched += usize::from(checksum != expected);
-        println!(
+        say!(
             "viewer {v}: version {version}, {} frames, {} bytes, first frame after {:.1} ms, checksum {checksum:08x} {status}",
             outcome.frames,
             outcome.bytes,
@@ -447,7 +469,7 @@ async fn view(
         for (c, view) in cameras.iter().enumerate() {
             let path = output_path(&out, v, clients, c, cameras.len());
             render(&geometry, &outcome.buffer, view, width, height).write_png(&path)?;
-            println!("  wrote {}", path.display());
+            say!("  wrote {}", path.display());
         }
     }
     if mismatched > 0 {
