@@ -483,3 +483,39 @@ async fn a_restart_serves_the_cached_solution_and_ignores_a_corrupt_cache() {
         (first.checksum, &third.report)
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_upgrade_with_a_malformed_key_is_refused_with_the_reason() {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let (address, _) = synthetic_server(3, Limits::default()).await;
+    let mut stream = tokio::net::TcpStream::connect(address).await.unwrap();
+    stream
+        .write_all(
+            format!(
+                "GET /ws HTTP/1.1\r\nHost: {address}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Key: not-a-key\r\n\r\n"
+            )
+            .as_bytes(),
+        )
+        .await
+        .unwrap();
+    // The connection stays open (keep-alive): read until the reason has arrived.
+    let mut response = Vec::new();
+    tokio::time::timeout(PATIENCE, async {
+        let mut chunk = [0u8; 1024];
+        while !String::from_utf8_lossy(&response).contains("(RFC 6455, 4.2.1)") {
+            let read = stream.read(&mut chunk).await.unwrap();
+            if read == 0 {
+                break;
+            }
+            response.extend_from_slice(&chunk[..read]);
+        }
+    })
+    .await
+    .expect("the refusal arrives");
+    let text = String::from_utf8_lossy(&response);
+    assert!(text.starts_with("HTTP/1.1 400"), "{text}");
+    assert!(
+        text.contains("Sec-WebSocket-Key must be 16 bytes in base64"),
+        "{text}"
+    );
+}

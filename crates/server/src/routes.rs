@@ -112,11 +112,30 @@ async fn metrics(State(shared): State<Arc<Shared>>) -> Response {
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
 }
 
+/// Whether `key` is what RFC 6455 (4.2.1) asks of `Sec-WebSocket-Key`: 16 bytes in base64,
+/// which is 22 characters of the alphabet (the last carrying 2 bits, so one of `AQgw`) and `==`.
+pub fn is_websocket_key(key: &[u8]) -> bool {
+    let alphabet = |c: &u8| c.is_ascii_alphanumeric() || *c == b'+' || *c == b'/';
+    key.len() == 24
+        && key[..22].iter().all(alphabet)
+        && b"AQgw".contains(&key[21])
+        && &key[22..] == b"=="
+}
+
 async fn websocket(
     State(shared): State<Arc<Shared>>,
     ConnectInfo(peer): ConnectInfo<SocketAddr>,
+    headers: HeaderMap,
     upgrade: WebSocketUpgrade,
 ) -> Response {
+    let key = headers.get(header::SEC_WEBSOCKET_KEY).map(|k| k.as_bytes());
+    if !key.is_some_and(is_websocket_key) {
+        return (
+            StatusCode::BAD_REQUEST,
+            "radcast-server: Sec-WebSocket-Key must be 16 bytes in base64 (RFC 6455, 4.2.1)\n",
+        )
+            .into_response();
+    }
     let slot = match try_admit(&shared, peer.ip()) {
         Ok(slot) => slot,
         Err(Refusal::ServerFull) => {
@@ -265,4 +284,25 @@ async fn set_transform(
         solver::scene::check_translation,
         crate::edits::Edits::translate,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_websocket_key;
+
+    #[test]
+    fn a_websocket_key_is_sixteen_bytes_in_base64() {
+        // RFC 6455's own example, then what is not 16 bytes or not canonical base64.
+        assert!(is_websocket_key(b"dGhlIHNhbXBsZSBub25jZQ=="));
+        for bad in [
+            &b"dGhlIHNhbXBsZSBub25jZQ"[..],
+            b"dGhlIHNhbXBsZSBub25jZR==",
+            b"dGhlIHNhbXBsZSBub25j*Q==",
+            b"dGhlIHNhbXBsZSBub25jZQ=",
+            b"x",
+            b"",
+        ] {
+            assert!(!is_websocket_key(bad), "{}", String::from_utf8_lossy(bad));
+        }
+    }
 }
