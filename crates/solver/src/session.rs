@@ -271,15 +271,8 @@ impl Session {
         // The responses were for the old transport: fold the edits into the emission (of the
         // patches, and of the scene, which a hierarchy is rebuilt from) and let the next solve
         // start over from it.
+        self.emission = self.current_emission();
         for (object, emission) in std::mem::take(&mut self.edited) {
-            for (e, _) in self
-                .emission
-                .iter_mut()
-                .zip(&self.patch_objects)
-                .filter(|(_, o)| **o == object)
-            {
-                *e = emission;
-            }
             self.scene
                 .faces
                 .iter_mut()
@@ -340,18 +333,21 @@ impl Session {
     /// ([`CornerLight::corner_radiosity`]: direct light gathered at the corner, indirect light
     /// from the patches around it).
     pub fn vertex_radiosity(&self) -> Vec<Rgb> {
-        let mut emission = self.emission.clone();
-        for (e, object) in emission.iter_mut().zip(&self.patch_objects) {
-            if let Some(edited) = self.edited.get(object) {
-                *e = *edited;
-            }
-        }
         self.corner_light.corner_radiosity(
             &self.mesh,
             self.transfer.transport(),
             &self.radiosity,
-            &emission,
+            &self.current_emission(),
         )
+    }
+
+    /// Each patch's emission with the edits applied, W/m^2.
+    fn current_emission(&self) -> Vec<Rgb> {
+        self.emission
+            .iter()
+            .zip(&self.patch_objects)
+            .map(|(e, object)| self.edited.get(object).copied().unwrap_or(*e))
+            .collect()
     }
 
     /// Takes `radiosity` as the solution for the scene's own emission (a cached solve), so that
