@@ -2,8 +2,9 @@
 //! that end equal to a from-scratch solve of the edited scene.
 
 use futures_util::StreamExt;
-use server::solving::{prepare, serve_edits, shared_for, solve_and_publish};
-use server::{Limits, Shared, routes};
+use server::prepared::{prepare, shared_for};
+use server::solving;
+use server::{Limits, Shared};
 use solver::{HierarchySettings, MethodChoice, MoveWork, PatchTarget, Rgb, SolveRequest};
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -40,12 +41,8 @@ async fn live(scene: &str, request: SolveRequest) -> (SocketAddr, Arc<Shared>, E
     let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let address = listener.local_addr().unwrap();
-    tokio::spawn(routes::serve(listener, shared.clone()));
-    let solver_side = shared.clone();
-    tokio::task::spawn_blocking(move || {
-        let solution = solve_and_publish(&prepared, &solver_side, None).unwrap();
-        serve_edits(&prepared, &solver_side, solution).unwrap();
-    });
+    tokio::spawn(server::listen::serve(listener, shared.clone()));
+    solving::start(prepared, shared.clone(), None);
     let edit_loop = EditLoop(shared.clone());
     (address, shared, edit_loop)
 }

@@ -1,13 +1,14 @@
 //! The server and viewers over real sockets on loopback: one solve, many viewers.
 
 use futures_util::{SinkExt, StreamExt};
+use server::admission::Refusal;
 use server::hub::Hub;
-use server::solving::{prepare, shared_for, solve_and_publish};
+use server::prepared::{prepare, shared_for};
+use server::solving::solve_and_publish;
 use server::{Limits, Shared, routes};
 use solver::{PatchTarget, SolveRequest};
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
 use std::time::Duration;
 use tokio_tungstenite::tungstenite::Message;
 use wire::{ClientMessage, ColourBuffer, Geometry, ServerMessage};
@@ -23,7 +24,7 @@ async fn serve(shared: Arc<Shared>) -> SocketAddr {
         .await
         .expect("bind an ephemeral port");
     let address = listener.local_addr().unwrap();
-    tokio::spawn(routes::serve(listener, shared));
+    tokio::spawn(server::listen::serve(listener, shared));
     address
 }
 
@@ -58,16 +59,7 @@ async fn synthetic_server(vertices: u32, limits: Limits) -> (SocketAddr, Arc<Sha
         camera: None,
     };
     let hub = Hub::new(7, &geometry, &vec![[0.0; 3]; vertices as usize]);
-    let shared = Arc::new(Shared {
-        hub: Arc::new(hub),
-        metrics: Default::default(),
-        limits,
-        shutdown: Default::default(),
-        report: Default::default(),
-        edits: Default::default(),
-        token: TOKEN.into(),
-        viewers_per_ip: Default::default(),
-    });
+    let shared = Shared::new(hub, limits, TOKEN.into());
     (serve(shared.clone()).await, shared)
 }
 
@@ -277,7 +269,7 @@ async fn a_stalled_viewer_neither_delays_others_nor_holds_memory() {
         );
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
-    assert_eq!(metrics.viewers.load(Ordering::Relaxed), 1);
+    assert_eq!(shared.viewers.open(), 1);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -350,8 +342,8 @@ async fn viewers_past_the_limit_are_refused_cleanly() {
         .await
         .expect_err("third is refused");
     assert!(refused.to_string().contains("503"), "{refused}");
-    assert_eq!(shared.metrics.refused.load(Ordering::Relaxed), 1);
-    let text = shared.metrics.render(10, 1, false);
+    assert_eq!(shared.viewers.refused(Refusal::ServerFull), 1);
+    let text = server::metrics::render(&shared);
     assert!(
         text.contains("radcast_viewers 2\n")
             && text.contains("radcast_viewers_refused_total{limit=\"server\"} 1\n"),
@@ -375,7 +367,7 @@ async fn one_address_past_its_limit_is_refused_and_its_slots_come_back() {
         .await
         .expect_err("third from one address");
     assert!(refused.to_string().contains("429"), "{refused}");
-    assert_eq!(shared.metrics.refused_per_ip.load(Ordering::Relaxed), 1);
+    assert_eq!(shared.viewers.refused(Refusal::AddressFull), 1);
     // When one leaves, its place is free again.
     drop(a);
     let deadline = tokio::time::Instant::now() + PATIENCE;

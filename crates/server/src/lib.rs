@@ -2,9 +2,14 @@
 //! background solve that feeds it. `main.rs` only parses flags and binds a socket, so tests run
 //! the same server on an ephemeral port.
 
+pub mod admission;
+pub mod cache;
 pub mod edits;
+pub mod health;
 pub mod hub;
+pub mod listen;
 pub mod metrics;
+pub mod prepared;
 pub mod routes;
 pub mod solving;
 pub mod viewer;
@@ -20,6 +25,13 @@ pub struct Limits {
     pub max_viewers: usize,
     /// Viewers at once from one IP address; more are refused with 429.
     pub max_viewers_per_ip: usize,
+    /// Open TCP connections at once (viewers and HTTP requests); more are refused with 503
+    /// before anything is read. Keep it under the open-file limit.
+    pub max_connections: usize,
+    /// Open TCP connections at once from one IP address; more are refused with 429.
+    pub max_connections_per_ip: usize,
+    /// A connection that has not sent a whole request head within this long is closed.
+    pub header_timeout: Duration,
     /// Largest message a viewer may send, bytes.
     pub max_message_bytes: usize,
     /// A send that takes longer drops the viewer (it stopped reading).
@@ -34,7 +46,13 @@ impl Default for Limits {
     fn default() -> Self {
         Limits {
             max_viewers: 20_000,
-            max_viewers_per_ip: 20_000,
+            // One address (a NAT, a load tester) may hold 5% of the viewers: twenty are needed
+            // to fill the server. Local load tests raise it.
+            max_viewers_per_ip: 1_000,
+            // Viewers plus room for HTTP requests, so /healthz answers with the viewers full.
+            max_connections: 21_000,
+            max_connections_per_ip: 1_100,
+            header_timeout: Duration::from_secs(10),
             max_message_bytes: 1024,
             send_timeout: Duration::from_secs(10),
             ping_interval: Duration::from_secs(15),
@@ -59,6 +77,34 @@ pub struct Shared {
     pub edits: edits::Edits,
     /// The bearer token the control API requires.
     pub token: String,
-    /// Viewers connected now, per IP address.
-    pub viewers_per_ip: std::sync::Mutex<std::collections::HashMap<std::net::IpAddr, usize>>,
+    /// Viewers connected now, under the viewer caps.
+    pub viewers: Arc<admission::Gate>,
+    /// TCP connections open now (viewers included), under the connection caps.
+    pub connections: Arc<admission::Gate>,
+    /// Every connection and viewer task, so shutdown can wait for their close frames.
+    pub tasks: tokio_util::task::TaskTracker,
+    /// Faults the solver thread reported.
+    pub health: health::Health,
+}
+
+impl Shared {
+    /// Shared state over `hub`, with nothing connected, no report yet and no faults.
+    pub fn new(hub: hub::Hub, limits: Limits, token: String) -> Arc<Shared> {
+        Arc::new(Shared {
+            hub: Arc::new(hub),
+            metrics: Default::default(),
+            limits,
+            shutdown: Default::default(),
+            report: Default::default(),
+            edits: Default::default(),
+            token,
+            viewers: admission::Gate::new(limits.max_viewers, limits.max_viewers_per_ip),
+            connections: admission::Gate::new(
+                limits.max_connections,
+                limits.max_connections_per_ip,
+            ),
+            tasks: Default::default(),
+            health: Default::default(),
+        })
+    }
 }

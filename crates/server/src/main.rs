@@ -2,8 +2,8 @@
 
 use anyhow::Context;
 use clap::Parser;
-use server::solving::{emitters, prepare, serve_edits, shared_for, solve_and_publish};
-use server::{Limits, routes};
+use server::prepared::{emitters, prepare, shared_for};
+use server::{Limits, listen, solving};
 use solver::args::SolveArgs;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -32,6 +32,16 @@ struct Args {
     /// Most viewers at once from one IP address; more get 429.
     #[arg(long, env = "RADCAST_MAX_VIEWERS_PER_IP", default_value_t = Limits::default().max_viewers_per_ip)]
     max_viewers_per_ip: usize,
+    /// Most TCP connections at once, viewers included; more are refused with 503 before any
+    /// byte is read (lowered to fit the open-file limit).
+    #[arg(long, env = "RADCAST_MAX_CONNECTIONS", default_value_t = Limits::default().max_connections)]
+    max_connections: usize,
+    /// Most TCP connections at once from one IP address; more get 429.
+    #[arg(long, env = "RADCAST_MAX_CONNECTIONS_PER_IP", default_value_t = Limits::default().max_connections_per_ip)]
+    max_connections_per_ip: usize,
+    /// Seconds a connection may take to send a whole request head before it is closed.
+    #[arg(long, default_value_t = Limits::default().header_timeout.as_secs_f64())]
+    header_timeout: f64,
     /// Seconds a send may take before a viewer is dropped as stalled.
     #[arg(long, default_value_t = Limits::default().send_timeout.as_secs_f64())]
     send_timeout: f64,
@@ -70,12 +80,13 @@ async fn main() -> anyhow::Result<()> {
         )
         .init();
     let args = Args::parse();
-    // One descriptor per viewer: take the hard limit.
-    let _ = rlimit::increase_nofile_limit(u64::MAX);
     let request = args.solve.request().map_err(anyhow::Error::msg)?;
     let limits = Limits {
         max_viewers: args.max_viewers,
         max_viewers_per_ip: args.max_viewers_per_ip,
+        max_connections: connection_cap(args.max_connections),
+        max_connections_per_ip: args.max_connections_per_ip,
+        header_timeout: seconds(args.header_timeout, "header-timeout")?,
         send_timeout: seconds(args.send_timeout, "send-timeout")?,
         idle_timeout: seconds(args.idle_timeout, "idle-timeout")?,
         ..Limits::default()
@@ -105,27 +116,65 @@ async fn main() -> anyhow::Result<()> {
     }
 
     let cache_dir = (!args.no_cache).then_some(args.cache_dir);
-    let solving = {
-        let shared = shared.clone();
-        tokio::task::spawn_blocking(move || {
-            let served = solve_and_publish(&prepared, &shared, cache_dir.as_deref())
-                .and_then(|solution| serve_edits(&prepared, &shared, solution));
-            if let Err(error) = served {
-                tracing::error!("solve failed: {error:#}");
-            }
-        })
-    };
+    // A plain thread: the process exits on a signal without waiting for a long solve.
+    solving::start(prepared, shared.clone(), cache_dir);
     let shutdown = shared.shutdown.clone();
+    let signals = shutdown_signals()?;
     tokio::spawn(async move {
-        let _ = tokio::signal::ctrl_c().await;
-        tracing::info!("shutting down: closing viewers");
+        let signal = signals.await;
+        tracing::info!("{signal}: shutting down, closing viewers");
         shutdown.cancel();
     });
-    let edits_done = shared.clone();
-    routes::serve(listener, shared).await?;
-    edits_done.edits.close();
-    solving.abort();
+    listen::serve(listener, shared.clone()).await?;
+    shared.edits.close();
+    // Every viewer gets its close frame (1001) unless it stalls past the grace.
+    shared.tasks.close();
+    if tokio::time::timeout(SHUTDOWN_DEADLINE, shared.tasks.wait())
+        .await
+        .is_err()
+    {
+        tracing::warn!(
+            viewers = shared.viewers.open(),
+            "exiting with connections still open"
+        );
+    }
     Ok(())
+}
+
+/// From the shutdown signal to exit, at most.
+const SHUTDOWN_DEADLINE: Duration = Duration::from_secs(2);
+
+/// File descriptors kept for everything but client connections (the listener, the cache,
+/// logs, the runtime).
+const RESERVED_DESCRIPTORS: u64 = 64;
+
+/// `asked`, lowered to what the open-file limit allows (raised to its hard limit first: one
+/// descriptor per connection), so the cap refuses connections before accept starts failing.
+fn connection_cap(asked: usize) -> usize {
+    let Ok(files) = rlimit::increase_nofile_limit(u64::MAX) else {
+        return asked;
+    };
+    let fits = files.saturating_sub(RESERVED_DESCRIPTORS) as usize;
+    if asked > fits {
+        tracing::warn!(
+            "--max-connections {asked} lowered to {fits}: the open-file limit is {files}"
+        );
+    }
+    asked.min(fits)
+}
+
+/// Handles Ctrl-C (SIGINT) and SIGTERM (what `docker stop` sends) from now on; the future
+/// ends with the name of the first that arrives.
+fn shutdown_signals() -> anyhow::Result<impl Future<Output = &'static str>> {
+    use tokio::signal::unix::{SignalKind, signal};
+    let mut terminate = signal(SignalKind::terminate()).context("cannot handle SIGTERM")?;
+    let mut interrupt = signal(SignalKind::interrupt()).context("cannot handle SIGINT")?;
+    Ok(async move {
+        tokio::select! {
+            _ = terminate.recv() => "SIGTERM",
+            _ = interrupt.recv() => "SIGINT",
+        }
+    })
 }
 
 /// Flickers every emitter between 40% and 100% of its emission, one change a second.

@@ -1,5 +1,8 @@
 //! Counters for `/metrics`, in the Prometheus text format.
 
+use crate::Shared;
+use crate::admission::{Gate, Refusal};
+use crate::health::{Fault, Status};
 use std::fmt::Write;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -27,15 +30,10 @@ impl DropReason {
     }
 }
 
-/// The server's counters; all updates are lock-free except the solve timings.
+/// The server's counters; all updates are lock-free except the solve timings. Viewer and
+/// connection counts live in their [`crate::admission::Gate`]s, faults in [`crate::health`].
 #[derive(Debug, Default)]
 pub struct Metrics {
-    /// Viewers connected now.
-    pub viewers: AtomicU64,
-    /// Viewers refused because the connection limit was reached.
-    pub refused: AtomicU64,
-    /// Viewers refused because their address reached its limit.
-    pub refused_per_ip: AtomicU64,
     /// Frames (full and delta) sent.
     pub frames_sent: AtomicU64,
     /// Bytes of frames sent.
@@ -65,109 +63,150 @@ impl Metrics {
         self.frames_sent.fetch_add(1, Ordering::Relaxed);
         self.bytes_sent.fetch_add(bytes as u64, Ordering::Relaxed);
     }
+}
 
-    /// The text served at `/metrics`.
-    pub fn render(&self, vertices: u32, solution_version: u64, is_final: bool) -> String {
-        let mut out = String::new();
-        let mut metric = |name: &str, kind: &str, help: &str, samples: &[(String, f64)]| {
-            let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} {kind}");
-            for (labels, value) in samples {
-                let _ = writeln!(out, "{name}{labels} {value}");
-            }
-        };
-        let plain = |v: u64| vec![(String::new(), v as f64)];
-        let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
-        metric(
-            "radcast_viewers",
-            "gauge",
-            "Viewers connected now.",
-            &plain(get(&self.viewers)),
-        );
-        let refused = vec![
-            ("{limit=\"server\"}".to_string(), get(&self.refused) as f64),
+/// The text served at `/metrics`.
+pub fn render(shared: &Shared) -> String {
+    let current = shared.hub.current();
+    let counters = &shared.metrics;
+    let mut out = String::new();
+    let mut metric = |name: &str, kind: &str, help: &str, samples: &[(String, f64)]| {
+        let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} {kind}");
+        for (labels, value) in samples {
+            let _ = writeln!(out, "{name}{labels} {value}");
+        }
+    };
+    let plain = |v: u64| vec![(String::new(), v as f64)];
+    let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
+    let refusals = |gate: &Gate| {
+        vec![
+            (
+                "{limit=\"server\"}".to_string(),
+                gate.refused(Refusal::ServerFull) as f64,
+            ),
             (
                 "{limit=\"per_ip\"}".to_string(),
-                get(&self.refused_per_ip) as f64,
+                gate.refused(Refusal::AddressFull) as f64,
             ),
-        ];
-        metric(
-            "radcast_viewers_refused_total",
-            "counter",
-            "Connections refused at a viewer limit.",
-            &refused,
-        );
-        let dropped: Vec<_> = DropReason::ALL
-            .iter()
-            .map(|r| {
-                (
-                    format!("{{reason=\"{}\"}}", r.label()),
-                    self.dropped_count(*r) as f64,
-                )
-            })
-            .collect();
-        metric(
-            "radcast_viewers_dropped_total",
-            "counter",
-            "Viewers disconnected by the server, by reason.",
-            &dropped,
-        );
-        metric(
-            "radcast_frames_sent_total",
-            "counter",
-            "Frames sent to viewers.",
-            &plain(get(&self.frames_sent)),
-        );
-        metric(
-            "radcast_bytes_sent_total",
-            "counter",
-            "Frame bytes sent to viewers.",
-            &plain(get(&self.bytes_sent)),
-        );
-        metric(
-            "radcast_versions_skipped_total",
-            "counter",
-            "Solution versions a slow viewer skipped.",
-            &plain(get(&self.versions_skipped)),
-        );
-        metric(
-            "radcast_full_resyncs_total",
-            "counter",
-            "Full frames sent where a delta did not apply.",
-            &plain(get(&self.full_resyncs)),
-        );
-        metric(
-            "radcast_vertices",
-            "gauge",
-            "Colours per frame: the geometry's vertices.",
-            &plain(vertices as u64),
-        );
-        metric(
-            "radcast_solution_version",
-            "gauge",
-            "Current solution version.",
-            &plain(solution_version),
-        );
-        metric(
-            "radcast_solution_final",
-            "gauge",
-            "1 once the solver converged.",
-            &plain(is_final as u64),
-        );
-        let stages: Vec<_> = self
-            .solve_seconds
-            .lock()
-            .map(|s| {
-                s.iter()
-                    .map(|(stage, v)| (format!("{{stage=\"{stage}\"}}"), *v))
-                    .collect()
-            })
-            .unwrap_or_default();
-        metric(
-            "radcast_solve_seconds",
-            "gauge",
-            "Seconds per solve stage.",
-            &stages,
-        );
-        out
-    }
+        ]
+    };
+    metric(
+        "radcast_viewers",
+        "gauge",
+        "Viewers connected now.",
+        &plain(shared.viewers.open() as u64),
+    );
+    metric(
+        "radcast_viewers_refused_total",
+        "counter",
+        "Viewers refused at a viewer cap.",
+        &refusals(&shared.viewers),
+    );
+    metric(
+        "radcast_connections",
+        "gauge",
+        "TCP connections open now, viewers included.",
+        &plain(shared.connections.open() as u64),
+    );
+    metric(
+        "radcast_connections_refused_total",
+        "counter",
+        "TCP connections refused at a connection cap before any byte was read.",
+        &refusals(&shared.connections),
+    );
+    let dropped: Vec<_> = DropReason::ALL
+        .iter()
+        .map(|r| {
+            (
+                format!("{{reason=\"{}\"}}", r.label()),
+                counters.dropped_count(*r) as f64,
+            )
+        })
+        .collect();
+    metric(
+        "radcast_viewers_dropped_total",
+        "counter",
+        "Viewers disconnected by the server, by reason.",
+        &dropped,
+    );
+    metric(
+        "radcast_frames_sent_total",
+        "counter",
+        "Frames sent to viewers.",
+        &plain(get(&counters.frames_sent)),
+    );
+    metric(
+        "radcast_bytes_sent_total",
+        "counter",
+        "Frame bytes sent to viewers.",
+        &plain(get(&counters.bytes_sent)),
+    );
+    metric(
+        "radcast_versions_skipped_total",
+        "counter",
+        "Solution versions a slow viewer skipped.",
+        &plain(get(&counters.versions_skipped)),
+    );
+    metric(
+        "radcast_full_resyncs_total",
+        "counter",
+        "Full frames sent where a delta did not apply.",
+        &plain(get(&counters.full_resyncs)),
+    );
+    metric(
+        "radcast_vertices",
+        "gauge",
+        "Colours per frame: the geometry's vertices.",
+        &plain(current.colours.len() as u64),
+    );
+    metric(
+        "radcast_solution_version",
+        "gauge",
+        "Current solution version.",
+        &plain(current.version),
+    );
+    metric(
+        "radcast_solution_final",
+        "gauge",
+        "1 once the solver converged.",
+        &plain(current.is_final as u64),
+    );
+    let stages: Vec<_> = counters
+        .solve_seconds
+        .lock()
+        .map(|s| {
+            s.iter()
+                .map(|(stage, v)| (format!("{{stage=\"{stage}\"}}"), *v))
+                .collect()
+        })
+        .unwrap_or_default();
+    metric(
+        "radcast_solve_seconds",
+        "gauge",
+        "Seconds per solve stage.",
+        &stages,
+    );
+    let faults: Vec<_> = Fault::ALL
+        .iter()
+        .map(|f| {
+            (
+                format!("{{kind=\"{}\"}}", f.label()),
+                shared.health.total(*f) as f64,
+            )
+        })
+        .collect();
+    metric(
+        "radcast_faults_total",
+        "counter",
+        "Faults the solver thread reported, by kind (see /healthz for the newest).",
+        &faults,
+    );
+    let up = !matches!(shared.health.status(), Status::Down(_));
+    metric(
+        "radcast_solver_up",
+        "gauge",
+        "1 while the solver thread applies edits.",
+        &plain(up as u64),
+    );
+    out
 }

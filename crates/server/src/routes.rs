@@ -1,7 +1,9 @@
 //! HTTP routes; each handler is a thin wrapper over plain data in [`Shared`].
 
 use crate::Shared;
-use crate::viewer::{Refusal, serve_viewer, try_admit};
+use crate::admission::Refusal;
+use crate::health::Status;
+use crate::viewer::serve_viewer;
 use axum::Router;
 use axum::extract::ConnectInfo;
 use axum::extract::Path;
@@ -19,7 +21,7 @@ use wire::SolutionSummary;
 /// and the control API `PUT /api/objects/{name}/emission` and `.../transform` (bearer token).
 pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
-        .route("/healthz", get(|| async { "ok\n" }))
+        .route("/healthz", get(health))
         .route("/api/scene", get(scene))
         .route("/api/scene.glb", get(scene_glb))
         .route("/api/solution", get(solution))
@@ -70,18 +72,6 @@ async fn scene_glb(State(shared): State<Arc<Shared>>) -> Response {
     }
 }
 
-/// Serves the router on `listener` until `shared.shutdown` is cancelled (viewers need their
-/// peer address for the per-IP limit).
-pub async fn serve(listener: tokio::net::TcpListener, shared: Arc<Shared>) -> std::io::Result<()> {
-    let stop = shared.shutdown.clone();
-    axum::serve(
-        listener,
-        router(shared).into_make_service_with_connect_info::<SocketAddr>(),
-    )
-    .with_graceful_shutdown(async move { stop.cancelled().await })
-    .await
-}
-
 /// The current summary, for `/api/solution` and tests: every field read from one published
 /// version, so the vertex count, geometry version and checksum always agree.
 pub fn solution_summary(shared: &Shared) -> SolutionSummary {
@@ -103,13 +93,20 @@ async fn solution(State(shared): State<Arc<Shared>>) -> Response {
 }
 
 async fn metrics(State(shared): State<Arc<Shared>>) -> Response {
-    let current = shared.hub.current();
-    let text = shared.metrics.render(
-        current.colours.len() as u32,
-        current.version,
-        current.is_final,
-    );
+    let text = crate::metrics::render(&shared);
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
+}
+
+/// `ok`; `degraded: WHAT` (still 200: viewers are served the last good solution); or
+/// `down: WHY` with 503 once the solver stopped and edits can no longer be applied.
+async fn health(State(shared): State<Arc<Shared>>) -> Response {
+    match shared.health.status() {
+        Status::Ok => "ok\n".into_response(),
+        Status::Degraded(what) => format!("degraded: {what}\n").into_response(),
+        Status::Down(why) => {
+            (StatusCode::SERVICE_UNAVAILABLE, format!("down: {why}\n")).into_response()
+        }
+    }
 }
 
 /// Whether `key` is what RFC 6455 (4.2.1) asks of `Sec-WebSocket-Key`: 16 bytes in base64,
@@ -136,8 +133,8 @@ async fn websocket(
         )
             .into_response();
     }
-    let slot = match try_admit(&shared, peer.ip()) {
-        Ok(slot) => slot,
+    let place = match shared.viewers.admit(peer.ip()) {
+        Ok(place) => place,
         Err(Refusal::ServerFull) => {
             return (
                 StatusCode::SERVICE_UNAVAILABLE,
@@ -161,7 +158,11 @@ async fn websocket(
         .write_buffer_size(0)
         .max_message_size(limits.max_message_bytes)
         .max_frame_size(limits.max_message_bytes)
-        .on_upgrade(move |socket| serve_viewer(socket, slot))
+        .on_upgrade(move |socket| {
+            shared
+                .tasks
+                .track_future(serve_viewer(socket, shared.clone(), place))
+        })
 }
 
 /// Whether `headers` carry `Authorization: Bearer <token>`, compared in constant time.
@@ -234,6 +235,9 @@ fn edit(
             StatusCode::UNAUTHORIZED,
             "missing or wrong bearer token".into(),
         );
+    }
+    if let Some(why) = shared.health.stopped() {
+        return refuse(StatusCode::SERVICE_UNAVAILABLE, why);
     }
     match parse_edit(
         &shared.hub.geometry().model.objects,

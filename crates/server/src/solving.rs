@@ -1,182 +1,59 @@
-//! Loading, meshing and solving for the server, with a disk cache of finished solutions.
+//! The solver thread: the first solve (or a proven cache entry), then edits as they come, each
+//! publishing one new version. Faults are reported through [`crate::health`], never swallowed:
+//! a refused edit or a failed cache write degrades `/healthz`, and a solver that stops says why.
 
 use crate::Shared;
-use crate::hub::Hub;
-use anyhow::Context;
-use bincode::{Decode, Encode};
+use crate::cache::{self, CachedSolution, Rejected};
+use crate::health::Fault;
+use crate::prepared::{Prepared, geometry_of};
 use glam::DVec3;
-use sha2::{Digest, Sha256};
-use solver::{Mesh, MoveWork, Progress, Rgb, Scene, Session, SolveRequest};
-use std::io::Write;
+use solver::{MoveWork, Progress, Rgb, Session};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use wire::summary::{HierarchyCounts, ObjectRadiosity, SolveReport, StageSeconds};
-use wire::{Camera, Geometry, geometry::NO_CORNER};
-
-/// A scene loaded and meshed, ready to solve.
-pub struct Prepared {
-    /// The scene.
-    pub scene: Scene,
-    /// Its patches (what the server streams).
-    pub mesh: Mesh,
-    /// How to solve it.
-    pub request: SolveRequest,
-    /// Hash of the scene files and settings.
-    pub scene_id: u64,
-    /// The geometry viewers fetch.
-    pub geometry: Geometry,
-    /// A hierarchy built to find the patches (its leaves), kept for the solve.
-    built: Mutex<Option<Session>>,
-}
 
 /// Progressive frames are published at most this often while the solver iterates.
 const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(100);
 
-/// Loads and meshes `scene_path`; fails with the loader's message on bad input. The
-/// hierarchical path refines here, since its leaves are the patches viewers fetch.
-pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepared> {
-    let scene = Scene::load_obj(scene_path)?;
-    let scene_id = scene_id(scene_path, &request)?;
-    let (mesh, built) = match &request.hierarchy {
-        Some(_) => {
-            let session = Session::hierarchical(&scene, &request, &solver::no_progress)?;
-            (session.mesh().clone(), Some(session))
-        }
-        None => (Mesh::build(&scene, request.patches), None),
-    };
-    let geometry = geometry_of(&scene, &mesh);
-    Ok(Prepared {
-        scene,
-        mesh,
-        request,
-        scene_id,
-        geometry,
-        built: Mutex::new(built),
-    })
-}
-
-/// The session to solve with: the hierarchy `prepare` built, or form factors computed now.
-fn session_for(
-    prepared: &Prepared,
-    progress: &(dyn Fn(Progress) + Sync),
-) -> anyhow::Result<Session> {
-    if let Some(session) = prepared.built.lock().expect("session lock").take() {
-        return Ok(session);
-    }
-    Ok(match &prepared.request.hierarchy {
-        Some(_) => Session::hierarchical(&prepared.scene, &prepared.request, progress)?,
-        None => Session::new(&prepared.scene, &prepared.mesh, &prepared.request, progress)?,
-    })
-}
-
-/// First 8 bytes of SHA-256 over the OBJ, its MTL libraries, the settings and this version.
-fn scene_id(scene_path: &Path, request: &SolveRequest) -> anyhow::Result<u64> {
-    let mut hasher = Sha256::new();
-    let text = std::fs::read(scene_path)
-        .with_context(|| format!("{}: cannot read", scene_path.display()))?;
-    hasher.update(&text);
-    let folder = scene_path.parent().unwrap_or(Path::new("."));
-    for line in String::from_utf8_lossy(&text).lines() {
-        if let Some(name) = line.trim().strip_prefix("mtllib ") {
-            hasher.update(std::fs::read(folder.join(name.trim())).unwrap_or_default());
-        }
-    }
-    hasher.update(format!("{request:?} {}", env!("CARGO_PKG_VERSION")));
-    let digest = hasher.finalize();
-    Ok(u64::from_le_bytes(
-        digest[..8].try_into().expect("SHA-256 has 32 bytes"),
-    ))
-}
-
-fn geometry_of(scene: &Scene, mesh: &Mesh) -> Geometry {
-    let to_f32 = |v: DVec3| v.as_vec3().to_array();
-    Geometry {
-        positions: mesh.positions.iter().map(|p| to_f32(*p)).collect(),
-        patches: mesh
-            .patches
-            .iter()
-            .map(|p| {
-                if p.corner_count() == 4 {
-                    p.corners
-                } else {
-                    [p.corners[0], p.corners[1], p.corners[2], NO_CORNER]
-                }
-            })
-            .collect(),
-        patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
-        objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
-        camera: scene.view.map(|v| Camera {
-            eye: to_f32(v.eye),
-            target: to_f32(v.target),
-            up: to_f32(v.up),
-            vertical_fov_degrees: v.vertical_fov_degrees as f32,
-        }),
-    }
-}
-
-fn to_f32(radiosity: &[Rgb]) -> Vec<[f32; 3]> {
+/// Radiosity as the hub takes it.
+pub fn to_f32(radiosity: &[Rgb]) -> Vec<[f32; 3]> {
     radiosity.iter().map(|b| b.as_vec3().to_array()).collect()
 }
 
-/// The state viewers see before the solve: every vertex at its face's emission.
-pub fn emission_only(prepared: &Prepared) -> Vec<[f32; 3]> {
-    let mesh = &prepared.mesh;
-    to_f32(&mesh.corner_means(&mesh.patches.iter().map(|p| p.emission).collect::<Vec<_>>()))
-}
-
-/// Creates the hub for `prepared`, publishing its emission-only state.
-pub fn hub_for(prepared: &Prepared) -> Hub {
-    Hub::new(
-        prepared.scene_id,
-        &prepared.geometry,
-        &emission_only(prepared),
-    )
-}
-
-#[derive(Encode, Decode)]
-struct CachedSolution {
-    /// Per patch: what a session adopts when the first edit arrives.
-    radiosity: Vec<[f32; 3]>,
-    /// Per vertex: what viewers are sent.
-    vertex_radiosity: Vec<[f32; 3]>,
-    report_json: String,
-}
-
-const CACHE_MAGIC: &[u8; 8] = b"RCCACHE2";
-
-fn cache_path(dir: &Path, scene_id: u64) -> PathBuf {
-    dir.join(format!("{scene_id:016x}.radcast"))
-}
-
-/// The cached solution and its report, if the file holds one for `mesh`'s patches and vertices.
-fn read_cache(path: &Path, mesh: &Mesh) -> Option<(CachedSolution, SolveReport)> {
-    let bytes = std::fs::read(path).ok()?;
-    let body = bytes.strip_prefix(CACHE_MAGIC.as_slice())?;
-    let (cached, _): (CachedSolution, usize) =
-        bincode::decode_from_slice(body, bincode::config::standard()).ok()?;
-    let report = serde_json::from_str(&cached.report_json).ok()?;
-    (cached.radiosity.len() == mesh.patches.len()
-        && cached.vertex_radiosity.len() == mesh.positions.len()
-        && cached
-            .radiosity
-            .iter()
-            .chain(&cached.vertex_radiosity)
-            .flatten()
-            .all(|c| c.is_finite() && *c >= 0.0))
-    .then_some((cached, report))
-}
-
-/// Writes atomically: a temporary file in the same folder, renamed over the target.
-fn write_cache(dir: &Path, path: &Path, cached: &CachedSolution) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    let mut file = tempfile::NamedTempFile::new_in(dir)?;
-    file.write_all(CACHE_MAGIC)?;
-    bincode::encode_into_std_write(cached, &mut file, bincode::config::standard())?;
-    file.as_file().sync_all()?;
-    file.persist(path)
-        .with_context(|| format!("{}: cannot write", path.display()))?;
-    Ok(())
+/// Starts the solver thread: [`solve_and_publish`], then [`serve_edits`] until
+/// [`crate::edits::Edits::close`]. An error or a panic in it is reported as
+/// [`Fault::SolverStopped`]; viewers keep the last published version. A plain thread, not
+/// tokio's blocking pool, so that shutdown never waits for a long solve.
+pub fn start(
+    prepared: Prepared,
+    shared: Arc<Shared>,
+    cache_dir: Option<PathBuf>,
+) -> std::thread::JoinHandle<()> {
+    std::thread::Builder::new()
+        .name("solver".into())
+        .spawn(move || {
+            let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                let solution = solve_and_publish(&prepared, &shared, cache_dir.as_deref())?;
+                serve_edits(&prepared, &shared, solution)
+            }));
+            let reason = match run {
+                Ok(Ok(())) => return,
+                Ok(Err(error)) => format!("{error:#}"),
+                Err(panic) => panic
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_else(|| "a panic".into()),
+            };
+            shared.health.fault(
+                Fault::SolverStopped,
+                format!(
+                    "the solver stopped ({reason}): serving the last solution, edits are refused"
+                ),
+            );
+        })
+        .expect("a thread for the solver")
 }
 
 /// What the first solve leaves for later edits: the live session, or (after a cache hit) the
@@ -198,17 +75,28 @@ pub fn solve_and_publish(
     let hub = &shared.hub;
     // A hierarchy is built before viewers connect (its leaves are the patches): a cached
     // solution would save only its last solve.
-    let cache = cache_dir
-        .filter(|_| prepared.request.hierarchy.is_none())
-        .map(|dir| (dir, cache_path(dir, prepared.scene_id)));
-    if let Some((cached, report)) = cache
-        .as_ref()
-        .and_then(|(_, path)| read_cache(path, &prepared.mesh))
-    {
-        tracing::info!("solution read from the cache");
-        *shared.report.lock().expect("report lock") = Some(report);
-        hub.publish(&cached.vertex_radiosity, true);
-        return Ok(Solution::Cached(cached.radiosity));
+    let cache_dir = cache_dir.filter(|_| prepared.request.hierarchy.is_none());
+    if let Some(dir) = cache_dir {
+        let path = cache::entry_path(dir, &prepared.digest);
+        let entry = cache::read(dir, &prepared.digest, &prepared.mesh).and_then(|cached| {
+            serde_json::from_str::<SolveReport>(&cached.report_json)
+                .map(|report| (cached, report))
+                .map_err(|_| Rejected::Corrupt("its report does not parse"))
+        });
+        match entry {
+            Ok((cached, report)) => {
+                tracing::info!(path = %path.display(), "solution read from the cache");
+                *shared.report.lock().expect("report lock") = Some(report);
+                hub.publish(&cached.vertex_radiosity, true);
+                return Ok(Solution::Cached(cached.radiosity));
+            }
+            Err(Rejected::Missing) => {
+                tracing::info!(path = %path.display(), "no cached solution: solving")
+            }
+            Err(why) => {
+                tracing::warn!(path = %path.display(), "cache entry not used, {why}: solving again")
+            }
+        }
     }
     let last_snapshot = Mutex::new(Instant::now());
     let progress = |p: Progress| {
@@ -221,10 +109,10 @@ pub fn solve_and_publish(
             hub.publish(&to_f32(&prepared.mesh.corner_means(radiosity)), false);
         }
     };
-    let mut session = session_for(prepared, &progress)?;
+    let mut session = prepared.session(&progress)?;
     let report = session.solve(&progress);
     let radiosity = to_f32(session.radiosity());
-    let vertex_radiosity = to_f32(&session.vertex_radiosity());
+    let vertex_radiosity = finite(to_f32(&session.vertex_radiosity()))?;
     let s = report.seconds;
     *shared.metrics.solve_seconds.lock().expect("metrics lock") = vec![
         ("mesh", s.mesh),
@@ -249,16 +137,22 @@ pub fn solve_and_publish(
     // The report goes in before the final frame: a viewer that sees "final" may ask for it at once.
     *shared.report.lock().expect("report lock") = Some(report);
     hub.publish(&vertex_radiosity, true);
-    if let Some((dir, path)) = cache {
-        write_cache(
-            dir,
-            &path,
-            &CachedSolution {
-                radiosity,
-                vertex_radiosity,
-                report_json,
-            },
-        )?;
+    if let Some(dir) = cache_dir {
+        let cached = CachedSolution {
+            radiosity,
+            vertex_radiosity,
+            report_json,
+        };
+        match cache::write(dir, &prepared.digest, &cached) {
+            Ok(path) => {
+                tracing::info!(path = %path.display(), "solution cached");
+                shared.health.recovered(Fault::CacheWrite);
+            }
+            Err(error) => shared.health.fault(
+                Fault::CacheWrite,
+                format!("the solution was not cached ({error:#}): a restart solves again"),
+            ),
+        }
     }
     Ok(Solution::Live(Box::new(session)))
 }
@@ -274,14 +168,14 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, solution: Solution) -> 
             let Some(batch) = shared.edits.wait() else {
                 return Ok(());
             };
-            let mut session = session_for(prepared, &solver::no_progress)?;
+            let mut session = prepared.session(&solver::no_progress)?;
             session.adopt_solution(
                 radiosity
                     .iter()
                     .map(|c| Rgb::new(c[0] as f64, c[1] as f64, c[2] as f64))
                     .collect(),
             );
-            apply(&mut session, shared, batch);
+            apply(&mut session, shared, batch)?;
             session
         }
     };
@@ -289,13 +183,18 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, solution: Solution) -> 
     let iterations = session.prepare_emitters();
     tracing::info!(iterations, "emitter responses ready");
     while let Some(batch) = shared.edits.wait() {
-        apply(&mut session, shared, batch);
+        apply(&mut session, shared, batch)?;
     }
     Ok(())
 }
 
-fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
+/// Applies one batch and publishes the result. An edit the solver refuses (a move that would
+/// carry an object past the coordinate bound, say: each PUT was valid, their sum is not) is
+/// reported as [`Fault::Edit`] while the rest of the batch is applied; a solve that gives
+/// non-finite values is an error, and nothing of it is published.
+fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) -> anyhow::Result<()> {
     let started = Instant::now();
+    let mut refused = Vec::new();
     let mut moved = false;
     for (object, offset) in &batch.moves {
         match session.translate(object, DVec3::from(*offset)) {
@@ -311,30 +210,25 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
                     }
                 }
             }
-            Err(error) => tracing::warn!("move refused: {error}"),
+            Err(error) => refused.push(format!("the move of '{object}' was refused: {error}")),
         }
     }
-    let mut report = None;
     if moved {
         // The moved scene from the current answer, then its new geometry for viewers.
-        report = Some(session.solve(&solver::no_progress));
+        session.solve(&solver::no_progress);
         shared
             .hub
             .replace_geometry(geometry_of(session.scene(), session.mesh()));
     }
-    if !batch.emissions.is_empty() {
-        for (object, emission) in &batch.emissions {
-            if let Err(error) = session.set_emission(object, Rgb::from(*emission)) {
-                tracing::warn!("edit refused: {error}");
-            }
+    for (object, emission) in &batch.emissions {
+        if let Err(error) = session.set_emission(object, Rgb::from(*emission)) {
+            refused.push(format!("the emission of '{object}' was refused: {error}"));
         }
-        report = Some(session.solve(&solver::no_progress));
     }
-    let report = report.unwrap_or_else(|| session.solve(&solver::no_progress));
+    let report = session.solve(&solver::no_progress);
+    let vertex_radiosity = finite(to_f32(&session.vertex_radiosity()))?;
     *shared.report.lock().expect("report lock") = Some(report_for_viewers(&report));
-    let version = shared
-        .hub
-        .publish(&to_f32(&session.vertex_radiosity()), report.converged);
+    let version = shared.hub.publish(&vertex_radiosity, report.converged);
     tracing::info!(
         version,
         emissions = batch.emissions.len(),
@@ -343,9 +237,22 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) {
         ms = started.elapsed().as_secs_f64() * 1e3,
         "re-solved"
     );
+    match refused.is_empty() {
+        true => shared.health.recovered(Fault::Edit),
+        false => shared.health.fault(Fault::Edit, refused.join("; ")),
+    }
     if moved {
         // Keep the lights' next edits instant on the moved scene.
         session.prepare_emitters();
+    }
+    Ok(())
+}
+
+/// `radiosity` if every value is finite: what the hub may publish.
+fn finite(radiosity: Vec<[f32; 3]>) -> anyhow::Result<Vec<[f32; 3]>> {
+    match radiosity.iter().flatten().all(|c| c.is_finite()) {
+        true => Ok(radiosity),
+        false => anyhow::bail!("the solve gave radiosity that is not finite (not published)"),
     }
 }
 
@@ -389,35 +296,4 @@ fn report_for_viewers(report: &solver::SolveReport) -> SolveReport {
             leaf_budget_reached: h.leaf_budget_reached,
         }),
     }
-}
-
-/// Everything a server needs for one scene: the shared state, ready for [`crate::routes::router`].
-pub fn shared_for(prepared: &Prepared, limits: crate::Limits, token: String) -> Arc<Shared> {
-    Arc::new(Shared {
-        hub: Arc::new(hub_for(prepared)),
-        metrics: Default::default(),
-        limits,
-        shutdown: Default::default(),
-        report: Mutex::new(None),
-        edits: Default::default(),
-        token,
-        viewers_per_ip: Default::default(),
-    })
-}
-
-/// The emitting objects and their emission as loaded, for animations.
-pub fn emitters(prepared: &Prepared) -> Vec<(String, [f64; 3])> {
-    let mut found: Vec<(String, [f64; 3])> = Vec::new();
-    for patch in prepared
-        .mesh
-        .patches
-        .iter()
-        .filter(|p| p.emission.max_element() > 0.0)
-    {
-        let name = &prepared.scene.objects[patch.object as usize].name;
-        if !found.iter().any(|(n, _)| n == name) {
-            found.push((name.clone(), patch.emission.to_array()));
-        }
-    }
-    found
 }

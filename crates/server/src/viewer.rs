@@ -2,71 +2,16 @@
 //! when the viewer holds its base), until the viewer leaves, misbehaves or stalls.
 
 use crate::Shared;
-use crate::metrics::{DropReason, Metrics};
+use crate::admission::Pass;
+use crate::listen::SHUTDOWN_GRACE;
+use crate::metrics::DropReason;
 use axum::extract::ws::{CloseFrame, Message, WebSocket, close_code};
 use bytes::Bytes;
 use futures_util::{SinkExt, StreamExt};
-use std::net::IpAddr;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use tokio::time::{Instant, interval, timeout};
 use wire::{ClientMessage, ServerMessage};
-
-/// A claimed place under the viewer limits; released however the connection ends, including
-/// an upgrade that never completes.
-pub struct ViewerSlot(Arc<Shared>, IpAddr);
-
-impl Drop for ViewerSlot {
-    fn drop(&mut self) {
-        self.0.metrics.viewers.fetch_sub(1, Ordering::Relaxed);
-        let mut per_ip = self.0.viewers_per_ip.lock().expect("per-IP lock");
-        if let Some(count) = per_ip.get_mut(&self.1) {
-            *count -= 1;
-            if *count == 0 {
-                per_ip.remove(&self.1);
-            }
-        }
-    }
-}
-
-/// Why a viewer was refused.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Refusal {
-    /// The server holds its maximum number of viewers.
-    ServerFull,
-    /// That address holds its maximum number of viewers.
-    AddressFull,
-}
-
-/// Claims a viewer slot for a viewer from `ip`, or says which limit refused it (counted).
-pub fn try_admit(shared: &Arc<Shared>, ip: IpAddr) -> Result<ViewerSlot, Refusal> {
-    let metrics: &Metrics = &shared.metrics;
-    let mut per_ip = shared.viewers_per_ip.lock().expect("per-IP lock");
-    let from_ip = per_ip.entry(ip).or_insert(0);
-    if *from_ip >= shared.limits.max_viewers_per_ip {
-        metrics.refused_per_ip.fetch_add(1, Ordering::Relaxed);
-        if *from_ip == 0 {
-            per_ip.remove(&ip);
-        }
-        return Err(Refusal::AddressFull);
-    }
-    let limit = shared.limits.max_viewers as u64;
-    if metrics
-        .viewers
-        .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
-            (n < limit).then_some(n + 1)
-        })
-        .is_err()
-    {
-        metrics.refused.fetch_add(1, Ordering::Relaxed);
-        if *from_ip == 0 {
-            per_ip.remove(&ip);
-        }
-        return Err(Refusal::ServerFull);
-    }
-    *from_ip += 1;
-    Ok(ViewerSlot(shared.clone(), ip))
-}
 
 /// Why a read failed: `Some(reason)` when the viewer broke the protocol (an oversized or
 /// malformed message), `None` when it just went away (reset, closed socket).
@@ -90,9 +35,8 @@ enum End {
     Shutdown,
 }
 
-/// Runs one admitted viewer to the end.
-pub async fn serve_viewer(socket: WebSocket, slot: ViewerSlot) {
-    let shared = slot.0.clone();
+/// Runs one admitted viewer to the end; `_place` holds its place under the viewer caps.
+pub async fn serve_viewer(socket: WebSocket, shared: Arc<Shared>, _place: Pass) {
     let metrics = &shared.metrics;
     let (mut sink, mut stream) = socket.split();
     let limits = shared.limits;
@@ -203,7 +147,11 @@ pub async fn serve_viewer(socket: WebSocket, slot: ViewerSlot) {
         End::Shutdown => Some(close(close_code::AWAY, "server shutting down")),
     };
     if let Some(message) = farewell {
-        // Best effort: a stalled viewer may not take even this.
-        let _ = timeout(limits.send_timeout, sink.send(message)).await;
+        // Best effort: a stalled viewer may not take even this, and shutdown does not wait.
+        let patience = match shared.shutdown.is_cancelled() {
+            true => limits.send_timeout.min(SHUTDOWN_GRACE),
+            false => limits.send_timeout,
+        };
+        let _ = timeout(patience, sink.send(message)).await;
     }
 }

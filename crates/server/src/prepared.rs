@@ -1,0 +1,132 @@
+//! A scene made ready to serve: loaded, meshed, its geometry encoded for viewers, and the
+//! shared state that routes and the solver thread work on.
+
+use crate::Shared;
+use crate::hub::Hub;
+use glam::DVec3;
+use solver::{Mesh, Progress, Scene, Session, SolveRequest};
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+use wire::{Camera, Geometry, geometry::NO_CORNER};
+
+/// A scene loaded and meshed, ready to solve.
+pub struct Prepared {
+    /// The scene.
+    pub scene: Scene,
+    /// Its patches (what the server streams).
+    pub mesh: Mesh,
+    /// How to solve it.
+    pub request: SolveRequest,
+    /// [`crate::cache::scene_digest`] of the scene and settings.
+    pub digest: [u8; 32],
+    /// The digest's first 8 bytes: the scene id viewers see.
+    pub scene_id: u64,
+    /// The geometry viewers fetch.
+    pub geometry: Geometry,
+    /// A hierarchy built to find the patches (its leaves), kept for the solve.
+    built: Mutex<Option<Session>>,
+}
+
+/// Loads and meshes `scene_path`; fails with the loader's message on bad input. The
+/// hierarchical path refines here, since its leaves are the patches viewers fetch.
+pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepared> {
+    let scene = Scene::load_obj(scene_path)?;
+    let digest = crate::cache::scene_digest(&scene, &request);
+    let scene_id = u64::from_le_bytes(digest[..8].try_into().expect("32 bytes"));
+    let (mesh, built) = match &request.hierarchy {
+        Some(_) => {
+            let session = Session::hierarchical(&scene, &request, &solver::no_progress)?;
+            (session.mesh().clone(), Some(session))
+        }
+        None => (Mesh::build(&scene, request.patches), None),
+    };
+    let geometry = geometry_of(&scene, &mesh);
+    Ok(Prepared {
+        scene,
+        mesh,
+        request,
+        digest,
+        scene_id,
+        geometry,
+        built: Mutex::new(built),
+    })
+}
+
+impl Prepared {
+    /// The session to solve with: the hierarchy `prepare` built, or form factors computed now.
+    pub fn session(&self, progress: &(dyn Fn(Progress) + Sync)) -> anyhow::Result<Session> {
+        if let Some(session) = self.built.lock().expect("session lock").take() {
+            return Ok(session);
+        }
+        Ok(match &self.request.hierarchy {
+            Some(_) => Session::hierarchical(&self.scene, &self.request, progress)?,
+            None => Session::new(&self.scene, &self.mesh, &self.request, progress)?,
+        })
+    }
+}
+
+/// The geometry viewers fetch for `mesh`.
+pub fn geometry_of(scene: &Scene, mesh: &Mesh) -> Geometry {
+    let to_f32 = |v: DVec3| v.as_vec3().to_array();
+    Geometry {
+        positions: mesh.positions.iter().map(|p| to_f32(*p)).collect(),
+        patches: mesh
+            .patches
+            .iter()
+            .map(|p| {
+                if p.corner_count() == 4 {
+                    p.corners
+                } else {
+                    [p.corners[0], p.corners[1], p.corners[2], NO_CORNER]
+                }
+            })
+            .collect(),
+        patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
+        objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
+        camera: scene.view.map(|v| Camera {
+            eye: to_f32(v.eye),
+            target: to_f32(v.target),
+            up: to_f32(v.up),
+            vertical_fov_degrees: v.vertical_fov_degrees as f32,
+        }),
+    }
+}
+
+/// The state viewers see before the solve: every vertex at its face's emission.
+pub fn emission_only(prepared: &Prepared) -> Vec<[f32; 3]> {
+    let mesh = &prepared.mesh;
+    crate::solving::to_f32(
+        &mesh.corner_means(&mesh.patches.iter().map(|p| p.emission).collect::<Vec<_>>()),
+    )
+}
+
+/// Creates the hub for `prepared`, publishing its emission-only state.
+pub fn hub_for(prepared: &Prepared) -> Hub {
+    Hub::new(
+        prepared.scene_id,
+        &prepared.geometry,
+        &emission_only(prepared),
+    )
+}
+
+/// Everything a server needs for one scene: the shared state, ready for [`crate::routes::router`].
+pub fn shared_for(prepared: &Prepared, limits: crate::Limits, token: String) -> Arc<Shared> {
+    Shared::new(hub_for(prepared), limits, token)
+}
+
+/// The emitting objects and their emission as loaded, for animations.
+pub fn emitters(prepared: &Prepared) -> Vec<(String, [f64; 3])> {
+    let mut found: Vec<(String, [f64; 3])> = Vec::new();
+    for patch in prepared
+        .mesh
+        .patches
+        .iter()
+        .filter(|p| p.emission.max_element() > 0.0)
+    {
+        let name = &prepared.scene.objects[patch.object as usize].name;
+        if !found.iter().any(|(n, _)| n == name) {
+            found.push((name.clone(), patch.emission.to_array()));
+        }
+    }
+    found
+}
