@@ -2,6 +2,7 @@
 //! that end equal to a from-scratch solve of the edited scene.
 
 use futures_util::StreamExt;
+use server::health::Fault;
 use server::prepared::{prepare, shared_for};
 use server::solving;
 use server::{Limits, Shared};
@@ -584,4 +585,88 @@ async fn a_hierarchical_server_streams_its_leaves_and_new_leaves_after_a_move() 
         (vertices, 2)
     );
     assert_eq!(mismatch(&viewer.buffer, &expected), None);
+}
+
+/// GET `path`; returns the status and the body.
+async fn get(address: SocketAddr, path: &str) -> (u16, String) {
+    let url = format!("http://{address}{path}");
+    tokio::task::spawn_blocking(move || {
+        let agent: ureq::Agent = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .build()
+            .into();
+        let mut response = agent.get(&url).call().unwrap();
+        (
+            response.status().as_u16(),
+            response.body_mut().read_to_string().unwrap(),
+        )
+    })
+    .await
+    .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_edit_the_solver_refuses_is_reported_and_the_next_edit_still_applies() {
+    let (address, shared, _edit_loop) = live_cornell().await;
+    let mut viewer = Viewer::connect(address).await;
+    viewer.wait_for(|_| true).await;
+    assert_eq!(get(address, "/healthz").await, (200, "ok\n".into()));
+    // Each move is within bounds on its own; the second would carry the block past 1e30.
+    let mut finished = shared.edits.finished();
+    for expect_fault in [false, true] {
+        let done = *finished.borrow_and_update() + 1;
+        let (status, _) = put(
+            address,
+            "/api/objects/tall_block/transform",
+            Some(TOKEN),
+            r#"{"translate": [9e29, 0, 0]}"#,
+        )
+        .await;
+        assert_eq!(status, 202);
+        tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= done))
+            .await
+            .expect("the batch is finished")
+            .unwrap();
+        assert_eq!(shared.health.total(Fault::Edit), expect_fault as u64);
+    }
+    let (status, health) = get(address, "/healthz").await;
+    assert_eq!(status, 200);
+    assert!(
+        health.starts_with("degraded: the move of 'tall_block' was refused:")
+            && health.contains("past 1e30"),
+        "{health}"
+    );
+    let (_, metrics) = get(address, "/metrics").await;
+    assert!(
+        metrics.contains("radcast_faults_total{kind=\"edit\"} 1\n")
+            && metrics.contains("radcast_solver_up 1\n"),
+        "{metrics}"
+    );
+    // The solver is alive: a light edit applies, and health recovers with it.
+    let done = *finished.borrow_and_update() + 1;
+    let (status, _) = put(
+        address,
+        "/api/objects/light/emission",
+        Some(TOKEN),
+        r#"{"emission": [5, 5, 5]}"#,
+    )
+    .await;
+    assert_eq!(status, 202);
+    tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= done))
+        .await
+        .expect("the batch is finished")
+        .unwrap();
+    let published = shared.hub.current().version;
+    viewer
+        .wait_for(|buffer| buffer.info.is_some_and(|i| i.solution_version == published))
+        .await;
+    assert!(
+        viewer
+            .buffer
+            .radiosity()
+            .iter()
+            .flatten()
+            .all(|c| c.is_finite())
+    );
+    assert_eq!(get(address, "/healthz").await, (200, "ok\n".into()));
 }

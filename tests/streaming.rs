@@ -511,3 +511,168 @@ async fn an_upgrade_with_a_malformed_key_is_refused_with_the_reason() {
         "{text}"
     );
 }
+
+/// Solves `scene` at 150 patches with `cache` as the cache folder, as a restarted server would;
+/// returns the summary it serves and the shared state.
+async fn solve_with_cache(
+    scene: &str,
+    cache: std::path::PathBuf,
+) -> (wire::SolutionSummary, Arc<Shared>) {
+    let scene = scene.to_string();
+    tokio::task::spawn_blocking(move || {
+        let request = SolveRequest {
+            patches: PatchTarget::Count(150),
+            ..SolveRequest::default()
+        };
+        let prepared = prepare(scene.as_ref(), request).unwrap();
+        let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
+        solve_and_publish(&prepared, &shared, Some(&cache)).unwrap();
+        (routes::solution_summary(&shared), shared)
+    })
+    .await
+    .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_cache_entry_not_proven_to_be_this_scenes_and_intact_is_solved_again() {
+    let cache = tempfile::tempdir().unwrap();
+    let (cornell, _) = solve_with_cache("scenes/cornell-box.obj", cache.path().into()).await;
+    let entry = std::fs::read_dir(cache.path())
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let intact = std::fs::read(&entry).unwrap();
+    // One flipped bit in an f32 exponent, in a mantissa, in the header: each is refused.
+    let payload = 8 + 32 + 8;
+    for bit in [(payload + 40) * 8 + 6, (payload + 41) * 8, 9 * 8 + 3] {
+        let mut flipped = intact.clone();
+        flipped[bit / 8] ^= 1 << (bit % 8);
+        std::fs::write(&entry, &flipped).unwrap();
+        let (again, _) = solve_with_cache("scenes/cornell-box.obj", cache.path().into()).await;
+        assert_eq!(again.checksum, cornell.checksum, "bit {bit}");
+        assert_ne!(
+            again.report, cornell.report,
+            "bit {bit}: solved afresh, fresh timings"
+        );
+        let (cached, _) = solve_with_cache("scenes/cornell-box.obj", cache.path().into()).await;
+        assert_eq!(
+            cached.report, again.report,
+            "bit {bit}: the entry was rewritten"
+        );
+    }
+    // Another scene's entry under this scene's name is refused too.
+    let (slab, _) = solve_with_cache("scenes/shadow-slab.obj", cache.path().into()).await;
+    let slab_entry = std::fs::read_dir(cache.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| *p != entry)
+        .unwrap();
+    std::fs::copy(&slab_entry, &entry).unwrap();
+    let (again, _) = solve_with_cache("scenes/cornell-box.obj", cache.path().into()).await;
+    assert_eq!(again.checksum, cornell.checksum);
+    assert_ne!(again.checksum, slab.checksum);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_cache_that_cannot_be_written_is_reported_and_the_solution_still_served() {
+    let blocker = tempfile::NamedTempFile::new().unwrap();
+    // A folder inside a regular file cannot be created.
+    let (summary, shared) =
+        solve_with_cache("scenes/cornell-box.obj", blocker.path().join("cache")).await;
+    assert!(summary.is_final);
+    match shared.health.status() {
+        server::health::Status::Degraded(what) => assert!(
+            what.starts_with("the solution was not cached (") && what.contains("cannot create"),
+            "{what}"
+        ),
+        other => panic!("expected degraded, got {other:?}"),
+    }
+    assert_eq!(shared.health.total(server::health::Fault::CacheWrite), 1);
+}
+
+/// A TCP connection to `address` from the loopback address `from` (any 127.x.y.z works on Linux).
+async fn connect_from(from: &str, address: SocketAddr) -> tokio::net::TcpStream {
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.bind(format!("{from}:0").parse().unwrap()).unwrap();
+    socket.connect(address).await.unwrap()
+}
+
+/// Everything the server writes until it closes the connection.
+async fn read_to_close(stream: &mut tokio::net::TcpStream) -> String {
+    use tokio::io::AsyncReadExt;
+    let mut text = Vec::new();
+    tokio::time::timeout(PATIENCE, stream.read_to_end(&mut text))
+        .await
+        .expect("the server closes the connection")
+        .unwrap();
+    String::from_utf8_lossy(&text).into_owned()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sockets_that_trickle_headers_are_capped_and_closed_and_others_are_served() {
+    use tokio::io::AsyncWriteExt;
+    let header_timeout = Duration::from_millis(300);
+    let (address, shared) = synthetic_server(
+        10,
+        Limits {
+            max_connections: 5,
+            max_connections_per_ip: 3,
+            header_timeout,
+            ..Limits::default()
+        },
+    )
+    .await;
+    // Three slow sockets take one address's share, two more from another the rest.
+    let mut slow = Vec::new();
+    for from in [
+        "127.0.0.1",
+        "127.0.0.1",
+        "127.0.0.1",
+        "127.0.0.2",
+        "127.0.0.2",
+    ] {
+        let mut stream = connect_from(from, address).await;
+        stream
+            .write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\n")
+            .await
+            .unwrap();
+        slow.push(stream);
+    }
+    let mut fourth = connect_from("127.0.0.1", address).await;
+    let refused = read_to_close(&mut fourth).await;
+    assert!(
+        refused.starts_with("HTTP/1.1 429")
+            && refused.ends_with("too many connections from 127.0.0.1\n"),
+        "{refused}"
+    );
+    let mut sixth = connect_from("127.0.0.3", address).await;
+    let refused = read_to_close(&mut sixth).await;
+    assert!(
+        refused.starts_with("HTTP/1.1 503") && refused.ends_with("connection limit reached\n"),
+        "{refused}"
+    );
+    // Each slow socket is closed once its header timeout has passed, without a response.
+    let started = std::time::Instant::now();
+    for stream in &mut slow {
+        assert_eq!(read_to_close(stream).await, "");
+    }
+    assert!(started.elapsed() >= header_timeout / 2);
+    // Their places came back: a whole request is served.
+    let mut healthy = connect_from("127.0.0.1", address).await;
+    healthy
+        .write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+        .await
+        .unwrap();
+    let answer = read_to_close(&mut healthy).await;
+    assert!(
+        answer.starts_with("HTTP/1.1 200") && answer.ends_with("ok\n"),
+        "{answer}"
+    );
+    let refusals = (
+        shared.connections.refused(Refusal::AddressFull),
+        shared.connections.refused(Refusal::ServerFull),
+    );
+    assert_eq!(refusals, (1, 1));
+}

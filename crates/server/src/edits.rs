@@ -3,12 +3,25 @@
 
 use std::collections::BTreeMap;
 use std::sync::{Condvar, Mutex};
+use tokio::sync::watch;
 
-/// Pending edits and the signal that wakes the solver thread.
-#[derive(Debug, Default)]
+/// Pending edits, the signal that wakes the solver thread, and the count of batches it has
+/// finished (applied or refused), which anyone may watch.
+#[derive(Debug)]
 pub struct Edits {
     pending: Mutex<Pending>,
     wake: Condvar,
+    finished: watch::Sender<u64>,
+}
+
+impl Default for Edits {
+    fn default() -> Self {
+        Edits {
+            pending: Mutex::default(),
+            wake: Condvar::default(),
+            finished: watch::Sender::new(0),
+        }
+    }
 }
 
 #[derive(Debug, Default)]
@@ -70,6 +83,17 @@ impl Edits {
     pub fn pending(&self) -> usize {
         let pending = self.pending.lock().expect("edits lock");
         pending.batch.emissions.len() + pending.batch.moves.len()
+    }
+
+    /// Counts one batch as finished: its edits were applied or refused, and what came of it
+    /// is published.
+    pub fn finish_batch(&self) {
+        self.finished.send_modify(|n| *n += 1);
+    }
+
+    /// Watches the count of finished batches.
+    pub fn finished(&self) -> watch::Receiver<u64> {
+        self.finished.subscribe()
     }
 
     /// Ends [`Edits::wait`] for good (shutdown).

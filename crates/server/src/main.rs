@@ -5,6 +5,7 @@ use clap::Parser;
 use server::prepared::{emitters, prepare, shared_for};
 use server::{Limits, listen, solving};
 use solver::args::SolveArgs;
+use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -106,7 +107,9 @@ async fn main() -> anyhow::Result<()> {
         .await
         .with_context(|| format!("cannot listen on {}", args.addr))?;
     let address = listener.local_addr()?;
-    println!(
+    // A closed stdout (`radcast-server | head -1`) must not stop the server: errors ignored.
+    let _ = writeln!(
+        std::io::stdout(),
         "radcast-server: {} ({} patches) on http://{address}\n  viewers: radcast-client view --url ws://{address}/ws --out view.png\n  control: curl -X PUT -H \"Authorization: Bearer {shown}\" -d '{{\"emission\": [17, 12, 4]}}' http://{address}/api/objects/NAME/emission",
         args.scene.display(),
         prepared.mesh.patches.len()

@@ -109,6 +109,12 @@ pub fn render(shared: &Shared) -> String {
         &plain(shared.connections.open() as u64),
     );
     metric(
+        "radcast_connected_addresses",
+        "gauge",
+        "Distinct peer addresses with a connection open now.",
+        &plain(shared.connections.addresses() as u64),
+    );
+    metric(
         "radcast_connections_refused_total",
         "counter",
         "TCP connections refused at a connection cap before any byte was read.",
@@ -200,6 +206,12 @@ pub fn render(shared: &Shared) -> String {
         "counter",
         "Faults the solver thread reported, by kind (see /healthz for the newest).",
         &faults,
+    );
+    metric(
+        "radcast_edit_batches_total",
+        "counter",
+        "Batches of edits the solver finished (applied, or refused and reported).",
+        &plain(*shared.edits.finished().borrow()),
     );
     let up = !matches!(shared.health.status(), Status::Down(_));
     metric(

@@ -228,6 +228,11 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) -> 
     let report = session.solve(&solver::no_progress);
     let vertex_radiosity = finite(to_f32(&session.vertex_radiosity()))?;
     *shared.report.lock().expect("report lock") = Some(report_for_viewers(&report));
+    // Health before the frame: a viewer that sees the new version sees its health too.
+    match refused.is_empty() {
+        true => shared.health.recovered(Fault::Edit),
+        false => shared.health.fault(Fault::Edit, refused.join("; ")),
+    }
     let version = shared.hub.publish(&vertex_radiosity, report.converged);
     tracing::info!(
         version,
@@ -237,10 +242,7 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) -> 
         ms = started.elapsed().as_secs_f64() * 1e3,
         "re-solved"
     );
-    match refused.is_empty() {
-        true => shared.health.recovered(Fault::Edit),
-        false => shared.health.fault(Fault::Edit, refused.join("; ")),
-    }
+    shared.edits.finish_batch();
     if moved {
         // Keep the lights' next edits instant on the moved scene.
         session.prepare_emitters();
