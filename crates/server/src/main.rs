@@ -9,6 +9,11 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
 
+/// jemalloc gives freed pages back to the system: after a flood of 18,000 slow connections had
+/// closed, glibc's per-thread arenas kept 185 of 398 MiB, jemalloc 55 of 329 (docs/RELIABILITY.md).
+#[global_allocator]
+static ALLOCATOR: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
+
 /// Serves the radiosity of a scene over WebSocket (viewers: `radcast-client view`).
 #[derive(Parser)]
 #[command(version, about)]
