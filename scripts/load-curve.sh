@@ -14,7 +14,9 @@ ulimit -n "$(ulimit -Hn)"
 
 start_server() { # PORT ARGS...
   local port=$1; shift
-  "$server" --addr "127.0.0.1:$port" --patches 2500 --no-cache --token load-test "$@" >/dev/null 2>&1 &
+  # Every viewer comes from 127.0.0.1: lift the per-address caps (defaults 1,000 / 1,100).
+  "$server" --addr "127.0.0.1:$port" --patches 2500 --no-cache --token load-test \
+    --max-viewers-per-ip 20000 --max-connections-per-ip 21000 "$@" >/dev/null 2>&1 &
   pid=$!
   for _ in $(seq 300); do curl -sf "http://127.0.0.1:$port/healthz" >/dev/null && return; sleep 0.1; done
   echo "server did not start" >&2; exit 1

@@ -246,3 +246,68 @@ fn a_scene_or_material_file_that_is_not_a_file_is_refused_unread() {
         .to_string();
     assert_eq!(error, "/dev/zero: not a regular file");
 }
+
+/// Every scene in tests/fuzz/scenes (inputs that once broke radcast) gives what its first
+/// line promises: `# expect: solves` (dense and hierarchical, every value finite and >= 0) or
+/// `# expect: TEXT` (a load or solve error containing TEXT).
+#[test]
+fn every_fuzz_regression_scene_gives_its_expected_outcome() {
+    let folder = std::path::Path::new("tests/fuzz/scenes");
+    let mut scenes: Vec<_> = std::fs::read_dir(folder)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "obj"))
+        .collect();
+    scenes.sort();
+    assert!(scenes.len() >= 6, "{scenes:?}");
+    for path in scenes {
+        let text = std::fs::read_to_string(&path).unwrap();
+        let expect = text
+            .lines()
+            .next()
+            .and_then(|l| l.strip_prefix("# expect: "))
+            .unwrap_or_else(|| panic!("{}: no '# expect:' line", path.display()));
+        for hierarchical in [false, true] {
+            let request = solver::SolveRequest {
+                patches: solver::PatchTarget::Count(48),
+                hierarchy: hierarchical.then_some(solver::HierarchySettings {
+                    error: 0.5,
+                    ..Default::default()
+                }),
+                ..Default::default()
+            };
+            let outcome = solver::solve_file(&path, &request, &solver::no_progress);
+            match (expect, outcome) {
+                ("solves", Ok(solved)) => {
+                    assert!(
+                        solved
+                            .radiosity
+                            .iter()
+                            .chain(&solved.vertex_radiosity)
+                            .flat_map(|b| b.to_array())
+                            .all(|c| c.is_finite() && c >= 0.0),
+                        "{}",
+                        path.display()
+                    );
+                    let lit = solved.radiosity.iter().any(|b| b.max_element() > 0.0);
+                    assert!(lit, "{}: solved black", path.display());
+                    if !hierarchical {
+                        assert!(
+                            solved.mesh.patches.len() <= 96,
+                            "{}: {} patches for 48",
+                            path.display(),
+                            solved.mesh.patches.len()
+                        );
+                    }
+                }
+                ("solves", Err(error)) => panic!("{}: {error}", path.display()),
+                (expected, Ok(_)) => panic!("{}: solved, expected '{expected}'", path.display()),
+                (expected, Err(error)) => assert!(
+                    error.to_string().contains(expected),
+                    "{}: '{error}' lacks '{expected}'",
+                    path.display()
+                ),
+            }
+        }
+    }
+}

@@ -1,6 +1,7 @@
 //! `radcast`: offline radiosity solves and benchmarks from the command line.
 
 mod error_sweep;
+mod fuzz;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
@@ -71,6 +72,28 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Seeded mutation fuzzing of the scene loader and solver (`scene`) or of every wire
+    /// decoder (`wire`); saves each finding's input and exits 1 if there was any.
+    Fuzz {
+        /// What to fuzz.
+        #[arg(value_enum)]
+        target: FuzzTarget,
+        /// Stop after this many cases.
+        #[arg(long)]
+        cases: Option<u64>,
+        /// Stop after this many seconds (with --cases: whichever comes first).
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// Seed: the same seed and case number give the same input.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Where findings' inputs are saved.
+        #[arg(long, default_value = "fuzz-findings")]
+        findings: PathBuf,
+        /// Folders of scene files to mutate (`scene` target).
+        #[arg(long, default_values = ["scenes", "tests/fuzz/scenes"])]
+        corpus: Vec<PathBuf>,
+    },
     /// Time every stage at several patch counts and print a Markdown table of medians; with
     /// --error, sweep configurations against each scene's reference and write
     /// docs/speed-vs-error.md and .svg.
@@ -106,6 +129,15 @@ enum Command {
         #[command(flatten)]
         settings: SolverArgs,
     },
+}
+
+/// What `radcast fuzz` aims at.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum FuzzTarget {
+    /// OBJ and MTL files through the loader, meshing and a small solve.
+    Scene,
+    /// Every wire decoder and the viewer's colour buffer.
+    Wire,
 }
 
 /// Prints a progress line to stderr at most once a second, after the first second.
@@ -259,6 +291,52 @@ fn main() -> anyhow::Result<()> {
                 out.display(),
                 probes
             );
+        }
+        Command::Fuzz {
+            target,
+            cases,
+            seconds,
+            seed,
+            findings,
+            corpus,
+        } => {
+            anyhow::ensure!(
+                cases.is_some() || seconds.is_some(),
+                "give --cases N, --seconds T or both"
+            );
+            let time = seconds
+                .map(|s| Duration::try_from_secs_f64(s).context("--seconds must be >= 0"))
+                .transpose()?;
+            let target: Box<dyn fuzz::Target> = match target {
+                FuzzTarget::Scene => Box::new(fuzz::scene::SceneTarget::from_folders(
+                    &corpus.iter().map(PathBuf::as_path).collect::<Vec<_>>(),
+                )?),
+                FuzzTarget::Wire => Box::new(fuzz::wire::WireTarget::default()),
+            };
+            let budget = fuzz::Budget { cases, time };
+            let report = fuzz::run(target.as_ref(), seed, budget, &findings)?;
+            println!(
+                "{}: {} cases in {:.1} s (seed {seed}): {} accepted, {} rejected with an error, {} findings; slowest case {} took {:.3} s",
+                target.name(),
+                report.cases,
+                report.seconds,
+                report.accepted,
+                report.rejected,
+                report.findings.len(),
+                report.slowest.0,
+                report.slowest.1
+            );
+            for finding in &report.findings {
+                println!(
+                    "  case {}: {} (input in {})",
+                    finding.case,
+                    finding.what,
+                    finding.saved.display()
+                );
+            }
+            if !report.findings.is_empty() {
+                std::process::exit(1);
+            }
         }
         Command::Generate { pieces, seed, out } => {
             let mtl_path = out.with_extension("mtl");

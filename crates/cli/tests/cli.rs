@@ -292,3 +292,28 @@ fn a_leaf_budget_coarsens_the_knob_and_says_so() {
     assert!(!refused.status.success());
     assert!(String::from_utf8_lossy(&refused.stderr).contains("--max-leaves must be at least 1"));
 }
+
+/// The CI slice of `radcast fuzz`: a fixed seed, a few hundred scenes and thousands of
+/// messages, no finding (docs/RELIABILITY.md has the long runs).
+#[test]
+fn a_seeded_fuzz_slice_finds_nothing() {
+    let findings = tempfile::tempdir().unwrap();
+    for (target, cases) in [("scene", "2000"), ("wire", "10000")] {
+        let (output, _) = radcast_ok(&[
+            "fuzz",
+            target,
+            "--cases",
+            cases,
+            "--seed",
+            "2026",
+            "--findings",
+            findings.path().to_str().unwrap(),
+        ]);
+        let summary = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            summary.starts_with(&format!("{target}: {cases} cases"))
+                && summary.contains(", 0 findings;"),
+            "{summary}"
+        );
+    }
+}

@@ -38,7 +38,7 @@ pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepa
             let session = Session::hierarchical(&scene, &request, &solver::no_progress)?;
             (session.mesh().clone(), Some(session))
         }
-        None => (Mesh::build(&scene, request.patches), None),
+        None => (solver::pipeline::dense_mesh(&scene, &request)?, None),
     };
     let geometry = geometry_of(&scene, &mesh);
     Ok(Prepared {

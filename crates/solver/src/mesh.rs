@@ -61,10 +61,7 @@ pub struct Mesh {
 impl Mesh {
     /// Splits every face of `scene` into patches of about the target size.
     pub fn build(scene: &Scene, target: PatchTarget) -> Mesh {
-        let edge = match target {
-            PatchTarget::Count(n) => Self::edge_length_for_count(scene, n),
-            PatchTarget::EdgeLength(length) => length,
-        };
+        let edge = Self::edge_length(scene, target);
         let mut mesh = Mesh::default();
         for (face_index, face) in scene.faces.iter().enumerate() {
             let first_patch = mesh.patches.len();
@@ -81,6 +78,19 @@ impl Mesh {
             }
         }
         mesh
+    }
+
+    /// Patches [`Mesh::build`] would make for `target`, counted without building them: what
+    /// a caller checks against memory before building.
+    pub fn planned_count(scene: &Scene, target: PatchTarget) -> usize {
+        Self::count_at(scene, Self::edge_length(scene, target))
+    }
+
+    fn edge_length(scene: &Scene, target: PatchTarget) -> f64 {
+        match target {
+            PatchTarget::Count(n) => Self::edge_length_for_count(scene, n),
+            PatchTarget::EdgeLength(length) => length,
+        }
     }
 
     /// Patches that [`Mesh::build`] makes for `scene` at this edge length, without building them.
@@ -108,7 +118,10 @@ impl Mesh {
     fn edge_length_for_count(scene: &Scene, count: usize) -> f64 {
         let total_area: f64 = scene.faces.iter().map(|f| f.polygon.area()).sum();
         let guess = (total_area / count.max(1) as f64).sqrt();
-        let (mut fine, mut coarse) = (guess / 8.0, guess * 8.0);
+        // At the scene's diagonal every face is one cell, however thin (a sliver of small
+        // area and huge length needs an edge far above the area's guess).
+        let diagonal = scene.bounds().map_or(0.0, |(lo, hi)| lo.distance(hi));
+        let (mut fine, mut coarse) = (guess / 8.0, (guess * 8.0).max(diagonal));
         for _ in 0..40 {
             let middle = (fine * coarse).sqrt();
             if Self::count_at(scene, middle) > count {

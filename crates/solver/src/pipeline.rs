@@ -97,6 +97,36 @@ impl SolveRequest {
     }
 }
 
+/// The uniform mesh of `request`, refused before it is built when its dense matrix would not
+/// fit `request.max_matrix_bytes` (a thin sliver at a fine edge length asks for millions).
+pub fn dense_mesh(scene: &Scene, request: &SolveRequest) -> Result<Mesh, SolveError> {
+    check_dense_size(
+        Mesh::planned_count(scene, request.patches),
+        scene.faces.len(),
+        request,
+    )?;
+    Ok(Mesh::build(scene, request.patches))
+}
+
+/// `Err(TooLarge)` when a dense matrix over `patches` would exceed `request.max_matrix_bytes`.
+pub fn check_dense_size(
+    patches: usize,
+    faces: usize,
+    request: &SolveRequest,
+) -> Result<(), SolveError> {
+    let bytes = crate::DenseFormFactors::memory_bytes(patches);
+    if bytes <= request.max_matrix_bytes {
+        return Ok(());
+    }
+    let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
+    Err(SolveError::TooLarge {
+        patches,
+        faces,
+        gib: gib(bytes),
+        limit_gib: gib(request.max_matrix_bytes),
+    })
+}
+
 /// Why a solve could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum SolveError {
@@ -108,11 +138,13 @@ pub enum SolveError {
     Method(#[from] NeedsEntries),
     /// The mesh is too fine for a dense matrix in the allowed memory.
     #[error(
-        "{patches} patches need {gib:.1} GiB for the dense form-factor matrix (limit {limit_gib:.1} GiB); ask for fewer patches"
+        "{patches} patches need {gib:.1} GiB for the dense form-factor matrix (limit {limit_gib:.1} GiB); ask for fewer patches (the scene's {faces} faces are the fewest a mesh can have) or use the hierarchical method"
     )]
     TooLarge {
         /// Patches the mesh has.
         patches: usize,
+        /// Faces of the scene: one patch each at least.
+        faces: usize,
         /// GiB the matrix would take.
         gib: f64,
         /// GiB allowed.
@@ -215,7 +247,7 @@ pub fn solve_scene(
         Some(_) => Session::hierarchical(&scene, request, progress)?,
         None => {
             let start = Instant::now();
-            let mesh = Mesh::build(&scene, request.patches);
+            let mesh = dense_mesh(&scene, request)?;
             let mesh_seconds = start.elapsed().as_secs_f64();
             let mut session = Session::new(&scene, &mesh, request, progress)?;
             session.seconds.mesh += mesh_seconds;

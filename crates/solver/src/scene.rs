@@ -56,6 +56,17 @@ pub enum SceneError {
         /// The object's name.
         object: String,
     },
+    /// An emitter has a face too small next to the scene to be solved: dropping it would
+    /// silently darken the scene.
+    #[error(
+        "{path}: object '{object}' emits light from a face below 1e-14 of the scene's squared diagonal: too small next to the rest of the scene to solve"
+    )]
+    EmitterTooSmall {
+        /// The OBJ file.
+        path: PathBuf,
+        /// The emitting object.
+        object: String,
+    },
     /// Nothing with a non-zero area is left to light.
     #[error("{path}: the scene has no faces with non-zero area")]
     Empty {
@@ -261,16 +272,23 @@ impl Scene {
         })
     }
 
-    /// Drops faces whose area is negligible against the scene's size, counting them.
-    pub fn drop_degenerate_faces(&mut self) {
+    /// Drops faces whose area is negligible against the scene's size, counting them; returns
+    /// the name of an emitting object that lost a face that way (its light would vanish).
+    pub fn drop_degenerate_faces(&mut self) -> Option<String> {
         let diagonal_sq = self
             .bounds()
             .map_or(0.0, |(lo, hi)| (hi - lo).length_squared());
         let before = self.faces.len();
         // Area ratios down to 1e-12 of the scene are real geometry (issue: tiny next to huge).
-        self.faces
-            .retain(|f| f.polygon.area() > 1e-14 * diagonal_sq);
+        let kept = |f: &Face| f.polygon.area() > 1e-14 * diagonal_sq;
+        let lost_light = self
+            .faces
+            .iter()
+            .find(|f| !kept(f) && f.emission.max_element() > 0.0)
+            .map(|f| self.objects[f.object as usize].name.clone());
+        self.faces.retain(kept);
         self.skipped_degenerate_faces += before - self.faces.len();
+        lost_light
     }
 
     /// Number of triangles the faces make (a quad counts two).
@@ -416,7 +434,12 @@ impl Scene {
                 scene.add_polygon(object, &corners, material);
             }
         }
-        scene.drop_degenerate_faces();
+        if let Some(object) = scene.drop_degenerate_faces() {
+            return Err(SceneError::EmitterTooSmall {
+                path: path.into(),
+                object,
+            });
+        }
         if scene.faces.is_empty() {
             return Err(SceneError::Empty { path: path.into() });
         }
@@ -430,7 +453,7 @@ pub const MAX_SCENE_FILE_BYTES: u64 = 4 << 30;
 
 /// Reads a scene or material file as text: a regular file of at most
 /// [`MAX_SCENE_FILE_BYTES`].
-fn read_scene_file(path: &Path) -> Result<String, SceneError> {
+pub fn read_scene_file(path: &Path) -> Result<String, SceneError> {
     let io = |source| SceneError::Io {
         path: path.into(),
         source,

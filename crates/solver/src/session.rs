@@ -109,15 +109,7 @@ impl Session {
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<Session, SolveError> {
         let n = mesh.patches.len();
-        let bytes = DenseFormFactors::memory_bytes(n);
-        if bytes > request.max_matrix_bytes {
-            let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
-            return Err(SolveError::TooLarge {
-                patches: n,
-                gib: gib(bytes),
-                limit_gib: gib(request.max_matrix_bytes),
-            });
-        }
+        crate::pipeline::check_dense_size(n, scene.faces.len(), request)?;
         let mut seconds = StageSeconds::default();
         let clock = Instant::now();
         let occluders = Occluders::new(scene);

@@ -15,11 +15,12 @@ use crate::geometry::NO_CORNER;
 
 type Rgb = [f32; 3];
 
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+/// `a - b` in f64: exact for f32 inputs, and no overflow at the far end of f32's range.
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|k| a[k] as f64 - b[k] as f64)
 }
 
-fn cross_length(a: [f32; 3], b: [f32; 3]) -> f32 {
+fn cross_length(a: [f64; 3], b: [f64; 3]) -> f64 {
     let c = [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],
@@ -37,8 +38,9 @@ pub fn corners(patch: &[u32; 4]) -> &[u32] {
     }
 }
 
-/// Area of patch `i` of `geometry`, scene units squared.
-pub fn patch_area(geometry: &Geometry, patch: &[u32; 4]) -> f32 {
+/// Area of patch `i` of `geometry`, scene units squared, in f64 (f32 positions near 1e38
+/// give areas past f32's range).
+pub fn patch_area(geometry: &Geometry, patch: &[u32; 4]) -> f64 {
     let p = |i: usize| geometry.positions[patch[i] as usize];
     if patch[3] == NO_CORNER {
         0.5 * cross_length(sub(p(1), p(0)), sub(p(2), p(0)))
@@ -63,7 +65,7 @@ pub fn exposure(geometry: &Geometry, vertex_radiosity: &[Rgb]) -> f32 {
     let (mut log_sum, mut area_sum) = (0.0f64, 0.0f64);
     for patch in &geometry.patches {
         let used = corners(patch);
-        let share = patch_area(geometry, patch) as f64 / used.len() as f64;
+        let share = patch_area(geometry, patch) / used.len() as f64;
         for &c in used {
             let rgb = vertex_radiosity.get(c as usize).unwrap_or(&[0.0; 3]);
             log_sum += share * (luminance(rgb).max(floor) as f64).ln();

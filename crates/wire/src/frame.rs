@@ -346,9 +346,11 @@ fn frame_info(
     vertex_count: u32,
     flags: u8,
 ) -> Result<FrameInfo, DecodeError> {
-    if !(scale.is_finite() && scale > 0.0) {
+    // The largest code times the scale must stay a finite f32.
+    let max_scale = f32::MAX / crate::rgb9e5::MAX_VALUE;
+    if !(scale > 0.0 && scale <= max_scale) {
         return Err(DecodeError::Invalid(format!(
-            "scale {scale} must be finite and positive"
+            "scale {scale} must be positive and at most {max_scale:e}"
         )));
     }
     Ok(FrameInfo {
