@@ -550,7 +550,9 @@ async fn a_hierarchical_server_streams_its_leaves_and_new_leaves_after_a_move() 
     viewer
         .wait_for(|b| b.info.unwrap().solution_version > before_version)
         .await;
-    assert_eq!(viewer.geometry_versions, [2]);
+    // Geometry 1 is the input faces, served while refinement runs; 2 the leaves; 3 the
+    // leaves of the moved scene.
+    assert_eq!(viewer.geometry_versions.last(), Some(&3));
     let mut moved = scene.clone();
     let block = scene
         .objects
@@ -579,12 +581,24 @@ async fn a_hierarchical_server_streams_its_leaves_and_new_leaves_after_a_move() 
         (vertices, vertices)
     );
     // One source of truth: the summary counts the new vertices and names the new geometry.
-    assert_eq!(scene_version, "2");
+    assert_eq!(scene_version, "3");
     assert_eq!(
         (summary.vertex_count as usize, summary.geometry_version),
-        (vertices, 2)
+        (vertices, 3)
     );
     assert_eq!(mismatch(&viewer.buffer, &expected), None);
+}
+
+#[test]
+fn a_hierarchical_server_prepares_without_refining_so_its_port_opens_at_once() {
+    let request = SolveRequest {
+        hierarchy: Some(HierarchySettings::default()),
+        ..request()
+    };
+    let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).unwrap();
+    // One patch per input face until the solver thread has refined: nothing was linked yet.
+    assert_eq!(prepared.mesh.patches.len(), prepared.scene.faces.len());
+    assert_eq!(prepared.geometry.patches.len(), prepared.scene.faces.len());
 }
 
 /// GET `path`; returns the status and the body.

@@ -156,7 +156,11 @@ impl ProgressPrinter {
     }
 
     fn report(&self, progress: Progress) {
-        if let Progress::Estimate { .. } = progress {
+        let Some(line) = progress.describe() else {
+            return;
+        };
+        if progress.is_warning() {
+            eprintln!("warning: {line}");
             return;
         }
         let Ok(mut last) = self.last.try_lock() else {
@@ -166,21 +170,7 @@ impl ProgressPrinter {
             return;
         }
         *last = Instant::now();
-        let t = self.start.elapsed().as_secs_f64();
-        match progress {
-            Progress::FormFactors { done, total } => eprintln!(
-                "[{t:6.1}s] form factors {:5.1}%",
-                100.0 * done as f64 / total as f64
-            ),
-            Progress::Solve {
-                iteration,
-                residual,
-            } => eprintln!("[{t:6.1}s] solve: iteration {iteration}, residual {residual:.3e}"),
-            Progress::Probes { done, total } => {
-                eprintln!("[{t:6.1}s] reference: {done} of {total} probes")
-            }
-            Progress::Estimate { .. } => {}
-        }
+        eprintln!("[{:6.1}s] {line}", self.start.elapsed().as_secs_f64());
     }
 }
 

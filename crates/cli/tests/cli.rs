@@ -317,3 +317,42 @@ fn a_seeded_fuzz_slice_finds_nothing() {
         );
     }
 }
+
+#[test]
+fn a_scene_that_emits_no_light_is_warned_about_before_the_solve() {
+    let folder = tempfile::tempdir().unwrap();
+    std::fs::write(
+        folder.path().join("dark.mtl"),
+        "newmtl grey\nKd 0.5 0.5 0.5\n",
+    )
+    .unwrap();
+    let scene = folder.path().join("dark.obj");
+    std::fs::write(
+        &scene,
+        "mtllib dark.mtl\no floor\nusemtl grey\nv 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 4 3 2 1\n",
+    )
+    .unwrap();
+    for method in ["gmres", "hierarchical"] {
+        let (report, stderr) = radcast_json(&[
+            "solve",
+            scene.to_str().unwrap(),
+            "--method",
+            method,
+            "--json",
+        ]);
+        assert!(
+            stderr.contains(
+                "warning: no material emits light (no positive Ke): every radiosity is 0"
+            ),
+            "{method}: {stderr}"
+        );
+        assert!(
+            report["objects"][0]["radiosity"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|c| c.as_f64() == Some(0.0)),
+            "{report}"
+        );
+    }
+}

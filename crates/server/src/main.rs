@@ -98,6 +98,12 @@ async fn main() -> anyhow::Result<()> {
         ..Limits::default()
     };
     let prepared = prepare(&args.scene, request)?;
+    if !prepared.scene.emits_light() {
+        tracing::warn!(
+            "{}: no material emits light (no positive Ke): every value is 0 until an emission edit",
+            args.scene.display()
+        );
+    }
     // A token the operator chose is theirs to know: only a made-up one is shown.
     let (token, shown) = match args.token {
         Some(token) if !token.is_empty() => (token, "$RADCAST_TOKEN".to_string()),
@@ -115,9 +121,15 @@ async fn main() -> anyhow::Result<()> {
     // A closed stdout (`radcast-server | head -1`) must not stop the server: errors ignored.
     let _ = writeln!(
         std::io::stdout(),
-        "radcast-server: {} ({} patches) on http://{address}\n  viewers: radcast-client view --url ws://{address}/ws --out view.png\n  control: curl -X PUT -H \"Authorization: Bearer {shown}\" -d '{{\"emission\": [17, 12, 4]}}' http://{address}/api/objects/NAME/emission",
+        "radcast-server: {} ({}) on http://{address}\n  viewers: radcast-client view --url ws://{address}/ws --out view.png\n  control: curl -X PUT -H \"Authorization: Bearer {shown}\" -d '{{\"emission\": [17, 12, 4]}}' http://{address}/api/objects/NAME/emission",
         args.scene.display(),
-        prepared.mesh.patches.len()
+        match prepared.request.hierarchy {
+            Some(_) => format!(
+                "{} faces; hierarchical, leaves follow refinement",
+                prepared.scene.faces.len()
+            ),
+            None => format!("{} patches", prepared.mesh.patches.len()),
+        }
     );
     if args.animate {
         tokio::spawn(animate(shared.clone(), emitters(&prepared)));

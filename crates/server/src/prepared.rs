@@ -4,9 +4,9 @@
 use crate::Shared;
 use crate::hub::Hub;
 use glam::DVec3;
-use solver::{Mesh, Progress, Scene, Session, SolveRequest};
+use solver::{Mesh, PatchTarget, Progress, Scene, Session, SolveRequest};
 use std::path::Path;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use wire::{Camera, Geometry, geometry::NO_CORNER};
 
 /// A scene loaded and meshed, ready to solve.
@@ -21,24 +21,20 @@ pub struct Prepared {
     pub digest: [u8; 32],
     /// The digest's first 8 bytes: the scene id viewers see.
     pub scene_id: u64,
-    /// The geometry viewers fetch.
+    /// The geometry viewers fetch first.
     pub geometry: Geometry,
-    /// A hierarchy built to find the patches (its leaves), kept for the solve.
-    built: Mutex<Option<Session>>,
 }
 
-/// Loads and meshes `scene_path`; fails with the loader's message on bad input. The
-/// hierarchical path refines here, since its leaves are the patches viewers fetch.
+/// Loads and meshes `scene_path`; fails with the loader's message on bad input. Quick: a
+/// hierarchy is refined later, on the solver thread, so the port opens at once; until then
+/// viewers see one patch per input face, then a geometry change to the leaves.
 pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepared> {
     let scene = Scene::load_obj(scene_path)?;
     let digest = crate::cache::scene_digest(&scene, &request);
     let scene_id = u64::from_le_bytes(digest[..8].try_into().expect("32 bytes"));
-    let (mesh, built) = match &request.hierarchy {
-        Some(_) => {
-            let session = Session::hierarchical(&scene, &request, &solver::no_progress)?;
-            (session.mesh().clone(), Some(session))
-        }
-        None => (solver::pipeline::dense_mesh(&scene, &request)?, None),
+    let mesh = match &request.hierarchy {
+        Some(_) => Mesh::build(&scene, PatchTarget::EdgeLength(f64::INFINITY)),
+        None => solver::pipeline::dense_mesh(&scene, &request)?,
     };
     let geometry = geometry_of(&scene, &mesh);
     Ok(Prepared {
@@ -48,16 +44,12 @@ pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepa
         digest,
         scene_id,
         geometry,
-        built: Mutex::new(built),
     })
 }
 
 impl Prepared {
-    /// The session to solve with: the hierarchy `prepare` built, or form factors computed now.
+    /// A session to solve with: the hierarchy refined, or the dense form factors computed.
     pub fn session(&self, progress: &(dyn Fn(Progress) + Sync)) -> anyhow::Result<Session> {
-        if let Some(session) = self.built.lock().expect("session lock").take() {
-            return Ok(session);
-        }
         Ok(match &self.request.hierarchy {
             Some(_) => Session::hierarchical(&self.scene, &self.request, progress)?,
             None => Session::new(&self.scene, &self.mesh, &self.request, progress)?,
@@ -93,8 +85,7 @@ pub fn geometry_of(scene: &Scene, mesh: &Mesh) -> Geometry {
 }
 
 /// The state viewers see before the solve: every vertex at its face's emission.
-pub fn emission_only(prepared: &Prepared) -> Vec<[f32; 3]> {
-    let mesh = &prepared.mesh;
+pub fn emission_only(mesh: &Mesh) -> Vec<[f32; 3]> {
     crate::solving::to_f32(
         &mesh.corner_means(&mesh.patches.iter().map(|p| p.emission).collect::<Vec<_>>()),
     )
@@ -105,7 +96,7 @@ pub fn hub_for(prepared: &Prepared) -> Hub {
     Hub::new(
         prepared.scene_id,
         &prepared.geometry,
-        &emission_only(prepared),
+        &emission_only(&prepared.mesh),
     )
 }
 

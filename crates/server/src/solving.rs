@@ -5,7 +5,7 @@
 use crate::Shared;
 use crate::cache::{self, CachedSolution, Rejected};
 use crate::health::Fault;
-use crate::prepared::{Prepared, geometry_of};
+use crate::prepared::{Prepared, emission_only, geometry_of};
 use glam::DVec3;
 use solver::{MoveWork, Progress, Rgb, Session};
 use std::path::{Path, PathBuf};
@@ -15,6 +15,40 @@ use wire::summary::{HierarchyCounts, ObjectRadiosity, SolveReport, StageSeconds}
 
 /// Progressive frames are published at most this often while the solver iterates.
 const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(100);
+
+/// Progress of a long solve in the log: a line at most every [`PROGRESS_LOG_INTERVAL`],
+/// warnings (a coarser knob than asked) always.
+#[derive(Debug)]
+struct ProgressLog {
+    last: Mutex<Instant>,
+}
+
+impl Default for ProgressLog {
+    fn default() -> Self {
+        ProgressLog {
+            last: Mutex::new(Instant::now()),
+        }
+    }
+}
+
+/// How often a long solve logs where it is.
+const PROGRESS_LOG_INTERVAL: Duration = Duration::from_secs(2);
+
+impl ProgressLog {
+    fn report(&self, progress: Progress) {
+        let Some(line) = progress.describe() else {
+            return;
+        };
+        if progress.is_warning() {
+            tracing::warn!("{line}");
+        } else if let Ok(mut last) = self.last.try_lock()
+            && last.elapsed() >= PROGRESS_LOG_INTERVAL
+        {
+            *last = Instant::now();
+            tracing::info!("{line}");
+        }
+    }
+}
 
 /// Radiosity as the hub takes it.
 pub fn to_f32(radiosity: &[Rgb]) -> Vec<[f32; 3]> {
@@ -98,18 +132,26 @@ pub fn solve_and_publish(
             }
         }
     }
+    let log = ProgressLog::default();
+    let mut session = prepared.session(&|p| log.report(p))?;
+    if prepared.request.hierarchy.is_some() {
+        // The leaves replace the input faces viewers have held while refinement ran.
+        hub.replace_geometry(geometry_of(&prepared.scene, session.mesh()));
+        hub.publish(&emission_only(session.mesh()), false);
+    }
+    let mesh = session.mesh().clone();
     let last_snapshot = Mutex::new(Instant::now());
     let progress = |p: Progress| {
+        log.report(p);
         if let Progress::Estimate { radiosity } = p
             && let Ok(mut last) = last_snapshot.try_lock()
             && last.elapsed() >= SNAPSHOT_INTERVAL
         {
             *last = Instant::now();
             // Not final: the patches' means at the corners will do until the direct gather.
-            hub.publish(&to_f32(&prepared.mesh.corner_means(radiosity)), false);
+            hub.publish(&to_f32(&mesh.corner_means(radiosity)), false);
         }
     };
-    let mut session = prepared.session(&progress)?;
     let report = session.solve(&progress);
     let radiosity = to_f32(session.radiosity());
     let vertex_radiosity = finite(to_f32(&session.vertex_radiosity()))?;

@@ -59,11 +59,80 @@ pub enum Progress<'a> {
         /// Relative residual (an estimate inside a GMRES cycle).
         residual: f64,
     },
+    /// Hierarchical refinement: one generation of link decisions done.
+    Refining {
+        /// The error knob this attempt refines to.
+        knob: f64,
+        /// Refinement round (0 on the first estimate, then one per new solution).
+        round: usize,
+        /// Leaves so far.
+        leaves: usize,
+        /// Links kept so far.
+        links: usize,
+        /// Pairs the next generation decides.
+        undecided: usize,
+    },
+    /// The leaf budget stopped refinement at `knob`; it starts again at `next_knob`.
+    Coarsening {
+        /// The knob abandoned.
+        knob: f64,
+        /// The knob tried next.
+        next_knob: f64,
+        /// The leaf budget that was reached.
+        max_leaves: usize,
+    },
+    /// Something the user should know before waiting for the result.
+    Warning {
+        /// What, in one sentence.
+        text: &'a str,
+    },
     /// The solver's current estimate, between iterations (at GMRES restarts).
     Estimate {
         /// Radiosity per patch, W/m^2; not yet converged.
         radiosity: &'a [Rgb],
     },
+}
+
+impl Progress<'_> {
+    /// One line for a person watching, or `None` for what is not worth a line (estimates).
+    pub fn describe(&self) -> Option<String> {
+        let percent = |done: usize, total: usize| 100.0 * done as f64 / total.max(1) as f64;
+        Some(match *self {
+            Progress::FormFactors { done, total } => {
+                format!("form factors {:5.1}%", percent(done, total))
+            }
+            Progress::Probes { done, total } => format!("reference: {done} of {total} probes"),
+            Progress::Solve {
+                iteration,
+                residual,
+            } => format!("solve: iteration {iteration}, residual {residual:.3e}"),
+            Progress::Refining {
+                knob,
+                round,
+                leaves,
+                links,
+                undecided,
+            } => format!(
+                "refining at error {knob}: round {}, {leaves} leaves, {links} links, {undecided} pairs to decide",
+                round + 1
+            ),
+            Progress::Coarsening {
+                knob,
+                next_knob,
+                max_leaves,
+            } => format!(
+                "refinement at error {knob} passed {max_leaves} leaves (--max-leaves): starting again at {next_knob}"
+            ),
+            Progress::Warning { text } => text.to_string(),
+            Progress::Estimate { .. } => return None,
+        })
+    }
+
+    /// Whether this must be shown even when progress lines are thinned out: it changes what
+    /// the user gets (a coarser knob than asked, a black result).
+    pub fn is_warning(&self) -> bool {
+        matches!(self, Progress::Coarsening { .. } | Progress::Warning { .. })
+    }
 }
 
 /// A progress sink that ignores everything.

@@ -243,6 +243,11 @@ pub fn solve_scene(
     request: &SolveRequest,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Solved, SolveError> {
+    if !scene.emits_light() {
+        progress(Progress::Warning {
+            text: "no material emits light (no positive Ke): every radiosity is 0",
+        });
+    }
     let mut session = match &request.hierarchy {
         Some(_) => Session::hierarchical(&scene, request, progress)?,
         None => {

@@ -291,6 +291,11 @@ impl Scene {
         lost_light
     }
 
+    /// Whether any face emits (a material with a positive `Ke`): without, every radiosity is 0.
+    pub fn emits_light(&self) -> bool {
+        self.faces.iter().any(|f| f.emission.max_element() > 0.0)
+    }
+
     /// Number of triangles the faces make (a quad counts two).
     pub fn triangle_count(&self) -> usize {
         self.faces

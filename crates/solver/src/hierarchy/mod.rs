@@ -49,7 +49,7 @@ use crate::solve::{NeedsEntries, SolveOutcome, SolverSettings, System, solve};
 use crate::visibility::Occluders;
 use operator::{Incoming, Slope};
 use rayon::prelude::*;
-use refine::{LeafBudget, Overflow, RefineTarget, Refinement};
+use refine::{LeafBudget, Overflow, RefineRun, RefineTarget, Refinement};
 use tree::Node;
 
 /// The one accuracy knob of the hierarchical path, and the budget that bounds its memory.
@@ -257,6 +257,11 @@ impl Hierarchy {
             if let Some(refined) = run.refine(tree.clone(), knob, budget)? {
                 return Ok(refined);
             }
+            progress(Progress::Coarsening {
+                knob,
+                next_knob: 2.0 * knob,
+                max_leaves: settings.max_leaves,
+            });
             knob *= 2.0;
         }
     }
@@ -332,7 +337,12 @@ impl Rounds<'_> {
                 self.occluders,
                 self.rays,
                 std::mem::take(&mut pending),
-                budget,
+                RefineRun {
+                    budget,
+                    knob,
+                    round,
+                    progress: self.progress,
+                },
             );
             hierarchy.stats.rounds = round + 1;
             if refinement == Refinement::Abandoned {
@@ -371,7 +381,9 @@ mod tests {
     use super::fixtures::closed_cube;
     use super::*;
 
-    fn build_with(scene: &Scene, error: f64, max_leaves: usize) -> HierarchyStats {
+    /// Builds at `error` within `max_leaves`; returns the stats and every progress line but
+    /// the estimates, in order.
+    fn build_with(scene: &Scene, error: f64, max_leaves: usize) -> (HierarchyStats, Vec<String>) {
         let settings = HierarchySettings {
             error,
             max_leaves,
@@ -380,23 +392,30 @@ mod tests {
         let occluders = Occluders::new(scene);
         let rays = FormFactorSettings::default();
         let solver = SolverSettings::default();
-        Hierarchy::build(
-            scene,
-            &occluders,
-            &settings,
-            rays,
-            &solver,
-            &crate::no_progress,
-        )
-        .expect("gmres needs no entries")
-        .hierarchy
-        .stats()
+        let lines = std::sync::Mutex::new(Vec::new());
+        let progress = |p: Progress| {
+            if let (Some(line), false) = (p.describe(), matches!(p, Progress::Solve { .. })) {
+                lines.lock().unwrap().push(line);
+            }
+        };
+        let stats = Hierarchy::build(scene, &occluders, &settings, rays, &solver, &progress)
+            .expect("gmres needs no entries")
+            .hierarchy
+            .stats();
+        (stats, lines.into_inner().unwrap())
     }
 
     #[test]
     fn the_knob_asked_for_is_used_when_its_leaves_fit() {
-        let stats = build_with(&closed_cube(), 0.1, 1_000_000);
+        let (stats, lines) = build_with(&closed_cube(), 0.1, 1_000_000);
         assert_eq!(stats.knob_used, 0.1);
+        // Refinement says where it is, ending on what it built.
+        let last = lines.last().expect("progress lines");
+        assert!(
+            last.starts_with("refining at error 0.1: round ")
+                && last.contains(&format!(" {} links, 0 pairs to decide", stats.links)),
+            "{lines:?}"
+        );
         assert!(!stats.leaf_budget_reached);
         assert!(
             stats.elements > 6,
@@ -411,8 +430,23 @@ mod tests {
         // factor to its neighbour runs from near 0 at the far edge to 1/2 along the shared
         // one); at 0.8 the unsplit faces carry every link within the knob. (Freezing when a
         // split is still asked for is checked on the Cornell box by the `radcast` tests.)
-        let stats = build_with(&closed_cube(), 0.1, 6);
+        let (stats, lines) = build_with(&closed_cube(), 0.1, 6);
         assert_eq!(stats.knob_used, 0.8);
+        // Each restart is said when it happens, not only at the end.
+        let restarts: Vec<_> = lines
+            .iter()
+            .filter(|l| l.contains("starting again"))
+            .collect();
+        assert_eq!(
+            restarts,
+            [0.1, 0.2, 0.4]
+                .map(|k| format!(
+                    "refinement at error {k} passed 6 leaves (--max-leaves): starting again at {}",
+                    2.0 * k
+                ))
+                .iter()
+                .collect::<Vec<_>>(),
+        );
         assert!(!stats.leaf_budget_reached);
         assert_eq!(stats.elements, 6);
         assert!(stats.links > 0);

@@ -6,6 +6,7 @@ use super::factor::{kernel_centre, tangent_coordinates};
 use super::shaft::Visibility;
 use super::tree::{MAX_DEPTH, Node};
 use super::{Hierarchy, Link};
+use crate::Progress;
 use crate::pair::FormFactorSettings;
 use crate::sampling::pair_seed;
 use crate::scene::Rgb;
@@ -57,6 +58,16 @@ pub(super) struct RefineTarget {
 pub(super) struct LeafBudget {
     pub(super) max_leaves: usize,
     pub(super) overflow: Overflow,
+}
+
+/// One refinement pass: its leaf budget, and where its progress goes after each generation of
+/// link decisions ([`Progress::Refining`], tagged with the knob and round).
+#[derive(Clone, Copy)]
+pub(super) struct RefineRun<'a> {
+    pub(super) budget: LeafBudget,
+    pub(super) knob: f64,
+    pub(super) round: usize,
+    pub(super) progress: &'a (dyn Fn(Progress) + Sync),
 }
 
 /// What to do when a round of splits would pass the leaf budget.
@@ -161,8 +172,9 @@ impl Hierarchy {
         occluders: &Occluders,
         rays: FormFactorSettings,
         mut pending: Vec<(u32, u32)>,
-        budget: LeafBudget,
+        run: RefineRun,
     ) -> Refinement {
+        let budget = run.budget;
         let (mut leaves, mut rays_cast, mut shaft_decided) = (self.leaves.len(), 0, 0);
         while !pending.is_empty() {
             let mut decide = |pairs: &[(u32, u32)], frozen: bool| {
@@ -230,6 +242,13 @@ impl Hierarchy {
                 }
             }
             pending = next;
+            (run.progress)(Progress::Refining {
+                knob: run.knob,
+                round: run.round,
+                leaves,
+                links: self.links.len(),
+                undecided: pending.len(),
+            });
         }
         self.stats.rays += rays_cast;
         self.stats.shaft_decided += shaft_decided;
