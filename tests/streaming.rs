@@ -676,3 +676,60 @@ async fn sockets_that_trickle_headers_are_capped_and_closed_and_others_are_serve
     );
     assert_eq!(refusals, (1, 1));
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_hierarchical_restart_serves_its_cached_leaves_and_edits_them_without_a_new_geometry() {
+    let cache = tempfile::tempdir().unwrap();
+    let request = SolveRequest {
+        hierarchy: Some(solver::HierarchySettings {
+            error: 0.2,
+            ..Default::default()
+        }),
+        ..SolveRequest::default()
+    };
+    let start = move |cache: std::path::PathBuf| {
+        tokio::task::spawn_blocking(move || {
+            let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).unwrap();
+            let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
+            let solution = solve_and_publish(&prepared, &shared, Some(&cache)).unwrap();
+            (prepared, shared, solution)
+        })
+    };
+    let (_, first, _) = start(cache.path().into()).await.unwrap();
+    let (prepared, second, solution) = start(cache.path().into()).await.unwrap();
+    let (a, b) = (
+        routes::solution_summary(&first),
+        routes::solution_summary(&second),
+    );
+    assert_eq!(
+        (b.checksum, b.is_final, &b.report),
+        (a.checksum, true, &a.report)
+    );
+    assert!(
+        matches!(solution, server::solving::Solution::Cached(_)),
+        "no refinement"
+    );
+    // Input faces, then the leaves: both starts serve the same leaves as geometry 2.
+    assert_eq!(first.hub.geometry().encoded, second.hub.geometry().encoded);
+    assert_eq!((a.geometry_version, b.geometry_version), (2, 2));
+    // The first edit refines behind the scenes, finds the same leaves and adopts the values.
+    let mut finished = second.edits.finished();
+    second.edits.set_emission("light", [5.0, 5.0, 5.0]);
+    let solver_side = second.clone();
+    let edits = tokio::task::spawn_blocking(move || {
+        server::solving::serve_edits(&prepared, &solver_side, solution)
+    });
+    tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= 1))
+        .await
+        .expect("the edit is applied")
+        .unwrap();
+    second.edits.close();
+    edits.await.unwrap().unwrap();
+    let edited = routes::solution_summary(&second);
+    assert!(edited.solution_version > b.solution_version && edited.is_final);
+    assert_eq!(
+        edited.geometry_version, 2,
+        "the refined leaves equal the cached ones"
+    );
+    assert_eq!(second.health.status(), server::health::Status::Ok);
+}

@@ -10,15 +10,16 @@
 //! | 8 | magic `RCCACHE3` |
 //! | 32 | scene digest ([`scene_digest`]) |
 //! | 8 | payload length, u64 little-endian |
-//! | n | payload: bincode (standard config) of the patch and vertex values and the report |
+//! | n | payload: bincode (standard config) of the geometry, the patch and vertex values and the report |
 //! | 32 | SHA-256 of everything before it |
 
 use anyhow::Context;
 use bincode::{Decode, Encode};
 use sha2::{Digest, Sha256};
-use solver::{Mesh, Scene, SolveRequest};
+use solver::{Scene, SolveRequest};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use wire::Geometry;
 
 const MAGIC: &[u8; 8] = b"RCCACHE3";
 const DIGEST_BYTES: usize = 32;
@@ -49,9 +50,12 @@ pub fn scene_digest(scene: &Scene, request: &SolveRequest) -> [u8; DIGEST_BYTES]
     hashing.0.finalize().into()
 }
 
-/// A finished solution as cached.
+/// A finished solution as cached, with the geometry its values belong to (a hierarchy's
+/// leaves are known only after refinement, which a cache hit skips).
 #[derive(Clone, Debug, PartialEq, Encode, Decode)]
 pub struct CachedSolution {
+    /// The geometry viewers are served, as `/api/scene` sends it.
+    pub geometry: Vec<u8>,
     /// Per patch: what a session adopts when the first edit arrives.
     pub radiosity: Vec<[f32; 3]>,
     /// Per vertex: what viewers are sent.
@@ -81,8 +85,8 @@ pub enum Rejected {
     /// Shorter or longer than its header says, or its checksum does not match.
     #[error("corrupt: {0}")]
     Corrupt(&'static str),
-    /// Intact, but its values do not fit this scene's mesh.
-    #[error("does not fit the mesh: {0}")]
+    /// Intact, but its values do not fit its geometry.
+    #[error("does not fit its geometry: {0}")]
     Mismatch(String),
 }
 
@@ -92,12 +96,11 @@ pub fn entry_path(dir: &Path, digest: &[u8; DIGEST_BYTES]) -> PathBuf {
     dir.join(format!("{name}.radcast"))
 }
 
-/// Reads the entry for `digest` from `dir` and checks it against `mesh`.
+/// Reads the entry for `digest` from `dir`: its geometry and values, once proven.
 pub fn read(
     dir: &Path,
     digest: &[u8; DIGEST_BYTES],
-    mesh: &Mesh,
-) -> Result<CachedSolution, Rejected> {
+) -> Result<(CachedSolution, Geometry), Rejected> {
     let bytes = match std::fs::read(entry_path(dir, digest)) {
         Ok(bytes) => bytes,
         Err(error) if error.kind() == std::io::ErrorKind::NotFound => {
@@ -106,18 +109,20 @@ pub fn read(
         Err(error) => return Err(Rejected::Unreadable(error.to_string())),
     };
     let cached = decode(&bytes, digest)?;
-    let counts_fit = cached.radiosity.len() == mesh.patches.len()
-        && cached.vertex_radiosity.len() == mesh.positions.len();
+    let geometry = Geometry::decode(&cached.geometry)
+        .map_err(|e| Rejected::Mismatch(format!("its geometry does not decode: {e}")))?;
+    let counts_fit = cached.radiosity.len() == geometry.patches.len()
+        && cached.vertex_radiosity.len() == geometry.positions.len();
     if !counts_fit {
         return Err(Rejected::Mismatch(format!(
-            "{} patches and {} vertices, the mesh has {} and {}",
+            "{} patch and {} vertex values for {} patches and {} vertices",
             cached.radiosity.len(),
             cached.vertex_radiosity.len(),
-            mesh.patches.len(),
-            mesh.positions.len()
+            geometry.patches.len(),
+            geometry.positions.len()
         )));
     }
-    Ok(cached)
+    Ok((cached, geometry))
 }
 
 /// The entry's payload, once its format, digest, length and checksum are proven.
@@ -197,6 +202,7 @@ mod tests {
 
     fn sample() -> CachedSolution {
         CachedSolution {
+            geometry: vec![1, 2, 3],
             radiosity: vec![[0.5, 1.0, 2.0], [3.0, 0.0, 0.25]],
             vertex_radiosity: vec![[1.5, 1.0, 0.125]; 3],
             report_json: "{}".into(),

@@ -107,20 +107,21 @@ pub fn solve_and_publish(
     cache_dir: Option<&Path>,
 ) -> anyhow::Result<Solution> {
     let hub = &shared.hub;
-    // A hierarchy is built before viewers connect (its leaves are the patches): a cached
-    // solution would save only its last solve.
-    let cache_dir = cache_dir.filter(|_| prepared.request.hierarchy.is_none());
     if let Some(dir) = cache_dir {
         let path = cache::entry_path(dir, &prepared.digest);
-        let entry = cache::read(dir, &prepared.digest, &prepared.mesh).and_then(|cached| {
+        let entry = cache::read(dir, &prepared.digest).and_then(|(cached, geometry)| {
             serde_json::from_str::<SolveReport>(&cached.report_json)
-                .map(|report| (cached, report))
+                .map(|report| (cached, geometry, report))
                 .map_err(|_| Rejected::Corrupt("its report does not parse"))
         });
         match entry {
-            Ok((cached, report)) => {
+            Ok((cached, geometry, report)) => {
                 tracing::info!(path = %path.display(), "solution read from the cache");
                 *shared.report.lock().expect("report lock") = Some(report);
+                if geometry != *hub.geometry().model {
+                    // A hierarchy's leaves, without refining again.
+                    hub.replace_geometry(geometry);
+                }
                 hub.publish(&cached.vertex_radiosity, true);
                 return Ok(Solution::Cached(cached.radiosity));
             }
@@ -181,6 +182,7 @@ pub fn solve_and_publish(
     hub.publish(&vertex_radiosity, true);
     if let Some(dir) = cache_dir {
         let cached = CachedSolution {
+            geometry: hub.geometry().encoded.to_vec(),
             radiosity,
             vertex_radiosity,
             report_json,
@@ -210,13 +212,23 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, solution: Solution) -> 
             let Some(batch) = shared.edits.wait() else {
                 return Ok(());
             };
-            let mut session = prepared.session(&solver::no_progress)?;
-            session.adopt_solution(
-                radiosity
-                    .iter()
-                    .map(|c| Rgb::new(c[0] as f64, c[1] as f64, c[2] as f64))
-                    .collect(),
-            );
+            let log = ProgressLog::default();
+            let mut session = prepared.session(&|p| log.report(p))?;
+            let fresh = geometry_of(&prepared.scene, session.mesh());
+            if fresh == *shared.hub.geometry().model {
+                session.adopt_solution(
+                    radiosity
+                        .iter()
+                        .map(|c| Rgb::new(c[0] as f64, c[1] as f64, c[2] as f64))
+                        .collect(),
+                );
+            } else {
+                // Refinement found other leaves than the cached ones (another build, another
+                // machine's rounding): theirs are served from this edit on, solved afresh.
+                tracing::warn!("the refined leaves differ from the cached ones: solving afresh");
+                shared.hub.replace_geometry(fresh);
+                session.solve(&solver::no_progress);
+            }
             apply(&mut session, shared, batch)?;
             session
         }
