@@ -149,9 +149,9 @@ pub fn budget_warnings(asked: &HierarchySettings, stats: &HierarchyStats) -> Vec
     }
     if stats.leaf_budget_reached {
         warnings.push(format!(
-            "refinement stopped at --max-leaves {} even at --error {}; some links carry more than \
-             that",
-            asked.max_leaves, stats.knob_used
+            "element splits stopped at {} leaves, where the next ones would have passed \
+             --max-leaves {} even at --error {}; some links carry more error than that",
+            stats.elements, asked.max_leaves, stats.knob_used
         ));
     }
     warnings
