@@ -619,6 +619,23 @@ async fn get(address: SocketAddr, path: &str) -> (u16, String) {
     .unwrap()
 }
 
+/// PUTs an edit with the token, expects it queued, and waits until the solver has finished
+/// the batch it went into (applied or refused).
+async fn edit_and_wait(
+    address: SocketAddr,
+    finished: &mut tokio::sync::watch::Receiver<u64>,
+    path: &str,
+    body: &str,
+) {
+    let done = *finished.borrow_and_update() + 1;
+    let (status, reply) = put(address, path, Some(TOKEN), body).await;
+    assert_eq!(status, 202, "{reply}");
+    tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= done))
+        .await
+        .expect("the batch is finished")
+        .unwrap();
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_edit_the_solver_refuses_is_reported_and_the_next_edit_still_applies() {
     let (address, shared, _edit_loop) = live_cornell().await;
@@ -628,19 +645,14 @@ async fn an_edit_the_solver_refuses_is_reported_and_the_next_edit_still_applies(
     // Each move is within bounds on its own; the second would carry the block past 1e30.
     let mut finished = shared.edits.finished();
     for expect_fault in [false, true] {
-        let done = *finished.borrow_and_update() + 1;
-        let (status, _) = put(
+        let path = "/api/objects/tall_block/transform";
+        edit_and_wait(
             address,
-            "/api/objects/tall_block/transform",
-            Some(TOKEN),
+            &mut finished,
+            path,
             r#"{"translate": [9e29, 0, 0]}"#,
         )
         .await;
-        assert_eq!(status, 202);
-        tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= done))
-            .await
-            .expect("the batch is finished")
-            .unwrap();
         assert_eq!(shared.health.total(Fault::Edit), expect_fault as u64);
     }
     let (status, health) = get(address, "/healthz").await;
@@ -657,19 +669,8 @@ async fn an_edit_the_solver_refuses_is_reported_and_the_next_edit_still_applies(
         "{metrics}"
     );
     // The solver is alive: a light edit applies, and health recovers with it.
-    let done = *finished.borrow_and_update() + 1;
-    let (status, _) = put(
-        address,
-        "/api/objects/light/emission",
-        Some(TOKEN),
-        r#"{"emission": [5, 5, 5]}"#,
-    )
-    .await;
-    assert_eq!(status, 202);
-    tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= done))
-        .await
-        .expect("the batch is finished")
-        .unwrap();
+    let path = "/api/objects/light/emission";
+    edit_and_wait(address, &mut finished, path, r#"{"emission": [5, 5, 5]}"#).await;
     let published = shared.hub.current().version;
     viewer
         .wait_for(|buffer| buffer.info.is_some_and(|i| i.solution_version == published))

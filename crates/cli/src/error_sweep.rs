@@ -82,7 +82,7 @@ pub fn run(
     for scene_path in scenes {
         let reference = load_reference(scene_path)?;
         let start = Instant::now();
-        let scene = Scene::load_obj(scene_path)?;
+        let scene = Scene::load(scene_path)?;
         let load = start.elapsed().as_secs_f64();
         let Sweep {
             counts,

@@ -31,7 +31,7 @@ struct Cli {
 enum Command {
     /// Solve a scene and print a summary (or JSON).
     Solve {
-        /// The OBJ file.
+        /// The scene: OBJ (with its MTL) or glTF 2.0 (`.gltf`, `.glb`).
         scene: PathBuf,
         #[command(flatten)]
         settings: SolveArgs,
@@ -45,7 +45,7 @@ enum Command {
     /// Estimate the continuous radiosity at probe points by path tracing: a reference that
     /// depends on no mesh.
     Reference {
-        /// The OBJ file.
+        /// The scene: OBJ (with its MTL) or glTF 2.0 (`.gltf`, `.glb`).
         scene: PathBuf,
         /// Probe points, spread over the surfaces by area.
         #[arg(long, default_value_t = 1000)]
@@ -98,7 +98,7 @@ enum Command {
     /// --error, sweep configurations against each scene's reference and write
     /// docs/speed-vs-error.md and .svg.
     Bench {
-        /// The OBJ files (several with --error).
+        /// The scenes, OBJ or glTF (several with --error).
         #[arg(required = true)]
         scenes: Vec<PathBuf>,
         /// Measure speed against error (needs scenes/reference/<name>.json).
@@ -254,7 +254,7 @@ fn main() -> anyhow::Result<()> {
                 probes > 0 && samples > 1,
                 "--probes must be at least 1 and --samples at least 2"
             );
-            let scene = Scene::load_obj(&path)?;
+            let scene = Scene::load(&path)?;
             // Before minutes of tracing, not after.
             create_parent(&out)?;
             let occluders = Occluders::new(&scene);

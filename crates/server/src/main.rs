@@ -18,7 +18,7 @@ static ALLOCATOR: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
 #[derive(Parser)]
 #[command(version, about)]
 struct Args {
-    /// The OBJ scene to serve.
+    /// The scene to serve: OBJ (with its MTL) or glTF 2.0 (`.gltf`, `.glb`).
     #[arg(long, env = "RADCAST_SCENE", default_value = "scenes/cornell-box.obj")]
     scene: PathBuf,
     /// Address to listen on.
@@ -98,7 +98,7 @@ async fn main() -> anyhow::Result<()> {
         ..Limits::default()
     };
     let prepared = prepare(&args.scene, request)?;
-    if !prepared.scene.emits_light() {
+    if !prepared.scene.has_emitter() {
         tracing::warn!(
             "{}: no material emits light (no positive Ke): every value is 0 until an emission edit",
             args.scene.display()

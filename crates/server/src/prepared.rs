@@ -29,7 +29,7 @@ pub struct Prepared {
 /// hierarchy is refined later, on the solver thread, so the port opens at once; until then
 /// viewers see one patch per input face, then a geometry change to the leaves.
 pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepared> {
-    let scene = Scene::load_obj(scene_path)?;
+    let scene = Scene::load(scene_path)?;
     let digest = crate::cache::scene_digest(&scene, &request);
     let scene_id = u64::from_le_bytes(digest[..8].try_into().expect("32 bytes"));
     let mesh = match &request.hierarchy {

@@ -10,6 +10,7 @@ pub mod form_factors;
 pub mod gather;
 pub mod generate;
 pub mod geometry;
+pub mod gltf_input;
 pub mod hierarchy;
 pub mod mesh;
 pub mod pair;

@@ -229,7 +229,7 @@ pub fn solve_file(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Solved, SolveError> {
     let start = Instant::now();
-    let scene = Scene::load_obj(path)?;
+    let scene = Scene::load(path)?;
     let load = start.elapsed().as_secs_f64();
     let mut solved = solve_scene(scene, request, progress)?;
     solved.report.seconds.load = load;
@@ -243,7 +243,7 @@ pub fn solve_scene(
     request: &SolveRequest,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Solved, SolveError> {
-    if !scene.emits_light() {
+    if !scene.has_emitter() {
         progress(Progress::Warning {
             text: "no material emits light (no positive Ke): every radiosity is 0",
         });

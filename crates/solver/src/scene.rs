@@ -291,11 +291,6 @@ impl Scene {
         lost_light
     }
 
-    /// Whether any face emits (a material with a positive `Ke`): without, every radiosity is 0.
-    pub fn emits_light(&self) -> bool {
-        self.faces.iter().any(|f| f.emission.max_element() > 0.0)
-    }
-
     /// Number of triangles the faces make (a quad counts two).
     pub fn triangle_count(&self) -> usize {
         self.faces
@@ -439,16 +434,34 @@ impl Scene {
                 scene.add_polygon(object, &corners, material);
             }
         }
-        if let Some(object) = scene.drop_degenerate_faces() {
+        scene.finish(path)
+    }
+
+    /// Loads an OBJ (with its MTL) or a glTF 2.0 file (`.gltf`, `.glb`), by extension.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let extension = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match extension.as_deref() {
+            Some("gltf" | "glb") => crate::gltf_input::load_gltf(path),
+            _ => Scene::load_obj(path),
+        }
+    }
+
+    /// What every loader ends with: degenerate faces dropped (an emitter among them is an
+    /// error), and a scene left with nothing to light refused.
+    pub(crate) fn finish(mut self, path: &Path) -> Result<Scene, SceneError> {
+        if let Some(object) = self.drop_degenerate_faces() {
             return Err(SceneError::EmitterTooSmall {
                 path: path.into(),
                 object,
             });
         }
-        if scene.faces.is_empty() {
+        if self.faces.is_empty() {
             return Err(SceneError::Empty { path: path.into() });
         }
-        Ok(scene)
+        Ok(self)
     }
 }
 
@@ -459,6 +472,16 @@ pub const MAX_SCENE_FILE_BYTES: u64 = 4 << 30;
 /// Reads a scene or material file as text: a regular file of at most
 /// [`MAX_SCENE_FILE_BYTES`].
 pub fn read_scene_file(path: &Path) -> Result<String, SceneError> {
+    check_scene_file(path)?;
+    std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        path: path.into(),
+        source,
+    })
+}
+
+/// Checks, without reading it, that `path` is a regular file of at most
+/// [`MAX_SCENE_FILE_BYTES`]: not a device that never ends, not a disk image.
+pub fn check_scene_file(path: &Path) -> Result<(), SceneError> {
     let io = |source| SceneError::Io {
         path: path.into(),
         source,
@@ -477,7 +500,7 @@ pub fn read_scene_file(path: &Path) -> Result<String, SceneError> {
             metadata.len()
         )));
     }
-    std::fs::read_to_string(path).map_err(io)
+    Ok(())
 }
 
 /// Colour statements of an MTL file: each needs three numbers.

@@ -1,0 +1,210 @@
+//! glTF 2.0 input (`.gltf` with its buffers and images, or `.glb`), read with the `gltf` crate.
+//!
+//! What a scene takes from it, in these units:
+//! - geometry: every triangle primitive of the default scene (else the first), placed by its
+//!   node's world transform; positions in the file's units (metres by the glTF spec);
+//! - reflectance: `baseColorFactor` times the mean of `baseColorTexture` over its texels, in
+//!   linear colour (sRGB texels decoded), at most [`MAX_REFLECTANCE`];
+//! - emission, W/m²: π times `emissiveFactor` times `KHR_materials_emissive_strength` times the
+//!   mean of `emissiveTexture`, reading the product as radiance (W/(m²·sr)); a Lambertian
+//!   surface's exitance is π times its radiance;
+//! - objects: one per node with a mesh, named after the node (else its mesh, else `node<N>`),
+//!   made unique with `#2`, `#3`… as needed.
+//!
+//! A texture's mean stands for the whole surface (texture coordinates are not read). Points,
+//! lines and strips-of-lines primitives, and files whose external buffers or images are not
+//! regular files, are refused with the reason.
+
+use crate::scene::{MAX_COORDINATE, Material, Rgb, Scene, SceneError, check_scene_file};
+use glam::{DMat4, DVec3};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// The largest reflectance a base colour gives: radiosity needs ρ < 1, and glTF's default base
+/// colour is 1 (a closed room of it would never converge).
+pub const MAX_REFLECTANCE: f64 = 0.99;
+
+/// Loads the glTF file at `path`.
+pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
+    let fail = |reason: String| SceneError::Parse {
+        path: path.into(),
+        reason,
+    };
+    check_scene_file(path)?;
+    let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
+        path: path.into(),
+        source,
+    })?;
+    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| fail(e.to_string()))?;
+    let folder = path.parent().unwrap_or(Path::new("."));
+    // The crate reads external files whole: check them first, as the OBJ loader does.
+    let external = gltf
+        .document
+        .buffers()
+        .filter_map(|b| match b.source() {
+            gltf::buffer::Source::Uri(uri) => Some(uri.to_string()),
+            gltf::buffer::Source::Bin => None,
+        })
+        .chain(gltf.document.images().filter_map(|i| match i.source() {
+            gltf::image::Source::Uri { uri, .. } => Some(uri.to_string()),
+            gltf::image::Source::View { .. } => None,
+        }));
+    for uri in external.filter(|u| !u.starts_with("data:")) {
+        check_scene_file(&folder.join(&uri))?;
+    }
+    let buffers = gltf::import_buffers(&gltf.document, Some(folder), gltf.blob.clone())
+        .map_err(|e| fail(format!("buffers: {e}")))?;
+    let images = gltf::import_images(&gltf.document, Some(folder), &buffers)
+        .map_err(|e| fail(format!("images: {e}")))?;
+    let document = &gltf.document;
+    let Some(root) = document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+    else {
+        return Err(fail("the file has no scene".into()));
+    };
+    let mut scene = Scene::default();
+    let mut names: HashMap<String, usize> = HashMap::new();
+    let mut stack: Vec<(gltf::Node, DMat4)> = root.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
+    while let Some((node, parent)) = stack.pop() {
+        let local = node
+            .transform()
+            .matrix()
+            .map(|column| column.map(f64::from));
+        let world = parent * DMat4::from_cols_array_2d(&local);
+        stack.extend(node.children().map(|child| (child, world)));
+        let Some(mesh) = node.mesh() else {
+            continue;
+        };
+        let base = node
+            .name()
+            .or(mesh.name())
+            .map_or_else(|| format!("node{}", node.index()), str::to_string);
+        let seen = names.entry(base.clone()).or_insert(0);
+        *seen += 1;
+        let name = match *seen {
+            1 => base,
+            n => format!("{base}#{n}"),
+        };
+        let object = scene.add_object(name.clone());
+        for (index, primitive) in mesh.primitives().enumerate() {
+            let at = format!("object '{name}' primitive {index}");
+            if primitive.mode() != gltf::mesh::Mode::Triangles {
+                return Err(fail(format!(
+                    "{at}: mode {:?} is not supported (triangles only)",
+                    primitive.mode()
+                )));
+            }
+            let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+            let positions: Vec<DVec3> = reader
+                .read_positions()
+                .ok_or_else(|| fail(format!("{at}: no POSITION attribute")))?
+                .map(|p| world.transform_point3(DVec3::from(p.map(f64::from))))
+                .collect();
+            if let Some(bad) = positions
+                .iter()
+                .position(|p| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE)
+            {
+                return Err(fail(format!(
+                    "{at}: vertex {bad} lies at {}, not a finite point within ±{MAX_COORDINATE:e}",
+                    positions[bad]
+                )));
+            }
+            let indices: Vec<u32> = match reader.read_indices() {
+                Some(indices) => indices.into_u32().collect(),
+                None => (0..positions.len() as u32).collect(),
+            };
+            if let Some(&bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
+                return Err(fail(format!(
+                    "{at}: index {bad} past its {} vertices",
+                    positions.len()
+                )));
+            }
+            let material = material_of(&primitive.material(), &images)
+                .map_err(|reason| fail(format!("{at}: {reason}")))?;
+            for triangle in indices.chunks_exact(3) {
+                let corners: Vec<DVec3> = triangle.iter().map(|&i| positions[i as usize]).collect();
+                scene.add_polygon(object, &corners, material);
+            }
+        }
+    }
+    scene.finish(path)
+}
+
+/// The radiosity material of a glTF material (see the module notes).
+fn material_of(
+    material: &gltf::Material,
+    images: &[gltf::image::Data],
+) -> Result<Material, String> {
+    let texture_mean = |texture: Option<gltf::Texture>| -> Result<Rgb, String> {
+        match texture {
+            None => Ok(Rgb::ONE),
+            Some(texture) => images
+                .get(texture.source().index())
+                .ok_or_else(|| format!("texture {} has no image", texture.index()))
+                .and_then(linear_mean),
+        }
+    };
+    let pbr = material.pbr_metallic_roughness();
+    let [r, g, b, _] = pbr.base_color_factor().map(f64::from);
+    let base = Rgb::new(r, g, b) * texture_mean(pbr.base_color_texture().map(|t| t.texture()))?;
+    let strength = f64::from(material.emissive_strength().unwrap_or(1.0));
+    // Exitance of a Lambertian emitter: π times its radiance.
+    let radiance = Rgb::from(material.emissive_factor().map(f64::from))
+        * strength
+        * texture_mean(material.emissive_texture().map(|t| t.texture()))?;
+    let converted = Material {
+        reflectance: base.min(Rgb::splat(MAX_REFLECTANCE)),
+        emission: radiance * std::f64::consts::PI,
+    };
+    converted.validate().map(|()| converted)
+}
+
+/// The mean colour of an image's texels, linear (8- and 16-bit channels are sRGB-decoded, as
+/// glTF stores colour textures; float channels are linear already). Alpha is ignored.
+fn linear_mean(image: &gltf::image::Data) -> Result<Rgb, String> {
+    use gltf::image::Format;
+    let (channels, bytes_per_channel) = match image.format {
+        Format::R8 => (1, 1),
+        Format::R8G8 => (2, 1),
+        Format::R8G8B8 => (3, 1),
+        Format::R8G8B8A8 => (4, 1),
+        Format::R16 => (1, 2),
+        Format::R16G16 => (2, 2),
+        Format::R16G16B16 => (3, 2),
+        Format::R16G16B16A16 => (4, 2),
+        Format::R32G32B32FLOAT => (3, 4),
+        Format::R32G32B32A32FLOAT => (4, 4),
+    };
+    let texel_bytes = channels * bytes_per_channel;
+    let texels = image.pixels.len() / texel_bytes;
+    if texels == 0 {
+        return Err("a texture with no texels".into());
+    }
+    let channel = |texel: &[u8], c: usize| -> f64 {
+        let at = &texel[c * bytes_per_channel..(c + 1) * bytes_per_channel];
+        match bytes_per_channel {
+            1 => srgb_to_linear(f64::from(at[0]) / 255.0),
+            2 => srgb_to_linear(f64::from(u16::from_le_bytes([at[0], at[1]])) / 65535.0),
+            _ => f64::from(f32::from_le_bytes([at[0], at[1], at[2], at[3]])),
+        }
+    };
+    let mut sum = Rgb::ZERO;
+    for texel in image.pixels.chunks_exact(texel_bytes) {
+        // Grey formats (one or two channels: grey and alpha) spread grey over r, g and b.
+        sum += match channels {
+            1 | 2 => Rgb::splat(channel(texel, 0)),
+            _ => Rgb::new(channel(texel, 0), channel(texel, 1), channel(texel, 2)),
+        };
+    }
+    Ok(sum / texels as f64)
+}
+
+/// The sRGB transfer function inverted (IEC 61966-2-1).
+fn srgb_to_linear(encoded: f64) -> f64 {
+    if encoded <= 0.04045 {
+        encoded / 12.92
+    } else {
+        ((encoded + 0.055) / 1.055).powf(2.4)
+    }
+}

@@ -1,0 +1,101 @@
+//! glTF 2.0 input: a scene in glTF loads as the same faces and materials as its OBJ twin, and
+//! what is not supported is refused with the reason.
+
+use solver::Scene;
+use std::path::Path;
+
+fn load(name: &str) -> Result<Scene, solver::SceneError> {
+    Scene::load(&Path::new("tests/gltf").join(name))
+}
+
+#[test]
+fn a_gltf_scene_loads_as_its_obj_twin() {
+    // Node transforms (a scaled and moved floor, a moved lamp), base colour times the linear
+    // mean of a white-and-black texture (0.5 x 0.5), and emission = pi x emissiveFactor x
+    // KHR_materials_emissive_strength: the OBJ twin was written by hand with those values.
+    let gltf = load("lamp-over-textured-floor.gltf").expect("loads");
+    let obj = load("lamp-over-textured-floor.obj").expect("loads");
+    let names = |s: &Scene| s.objects.iter().map(|o| o.name.clone()).collect::<Vec<_>>();
+    let mut gltf_names = names(&gltf);
+    gltf_names.sort();
+    assert_eq!(gltf_names, names(&obj));
+    assert_eq!(gltf.faces.len(), obj.faces.len());
+    for face in &obj.faces {
+        let name = &obj.objects[face.object as usize].name;
+        let twin = gltf
+            .faces
+            .iter()
+            .find(|f| {
+                gltf.objects[f.object as usize].name == *name
+                    && f.polygon
+                        .corners()
+                        .iter()
+                        .zip(face.polygon.corners())
+                        .all(|(a, b)| a.distance(*b) < 1e-6)
+            })
+            .unwrap_or_else(|| panic!("no glTF face at {:?}", face.polygon.corners()));
+        assert!(
+            (twin.reflectance - face.reflectance).abs().max_element() < 1e-12
+                // tobj reads MTL values as f32.
+                && (twin.emission - face.emission).abs().max_element() < 1e-6 * face.emission.max_element().max(1.0),
+            "{name}: {:?} {:?} vs {:?} {:?}",
+            twin.reflectance,
+            twin.emission,
+            face.reflectance,
+            face.emission
+        );
+    }
+    // And so it solves to the same light.
+    let request = solver::SolveRequest {
+        patches: solver::PatchTarget::Count(200),
+        ..Default::default()
+    };
+    let [a, b] =
+        [gltf, obj].map(|s| solver::solve_scene(s, &request, &solver::no_progress).unwrap());
+    let mean = |s: &solver::Solved| {
+        let floor = s
+            .scene
+            .objects
+            .iter()
+            .position(|o| o.name == "floor")
+            .unwrap() as u32;
+        let (sum, area) = s
+            .mesh
+            .patches
+            .iter()
+            .zip(&s.radiosity)
+            .filter(|(p, _)| p.object == floor)
+            .fold((solver::Rgb::ZERO, 0.0), |(sum, area), (p, b)| {
+                (sum + *b * p.area, area + p.area)
+            });
+        sum / area
+    };
+    assert!((mean(&a) - mean(&b)).abs().max_element() <= 1e-6 * mean(&b).max_element());
+    assert!(mean(&a).max_element() > 0.0);
+}
+
+#[test]
+fn a_binary_gltf_loads_as_its_text_twin() {
+    let [glb, gltf] = [
+        "lamp-over-textured-floor.glb",
+        "lamp-over-textured-floor.gltf",
+    ]
+    .map(|name| load(name).expect("loads"));
+    assert_eq!(glb.faces, gltf.faces);
+}
+
+#[test]
+fn what_gltf_input_does_not_support_is_refused_with_the_reason() {
+    let lines = load("lines-primitive.gltf").unwrap_err().to_string();
+    assert!(
+        lines.ends_with("object 'floor' primitive 0: mode Lines is not supported (triangles only)"),
+        "{lines}"
+    );
+    let device = load("device-buffer.gltf").unwrap_err().to_string();
+    assert_eq!(device, "/dev/zero: not a regular file");
+    let missing = load("no-such-file.glb").unwrap_err().to_string();
+    assert!(
+        missing.contains("no-such-file.glb: cannot read"),
+        "{missing}"
+    );
+}
