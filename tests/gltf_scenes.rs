@@ -99,3 +99,19 @@ fn what_gltf_input_does_not_support_is_refused_with_the_reason() {
         "{missing}"
     );
 }
+
+#[test]
+fn an_obj_map_kd_is_kd_times_the_textures_linear_mean() {
+    let textured = load("map-kd.obj").expect("loads");
+    let twin = load("lamp-over-textured-floor.obj").expect("loads");
+    let floor = |s: &Scene| {
+        let id = s.objects.iter().position(|o| o.name == "floor").unwrap() as u32;
+        s.faces.iter().find(|f| f.object == id).unwrap().reflectance
+    };
+    assert!((floor(&textured) - floor(&twin)).abs().max_element() < 1e-7);
+    let missing = load("map-kd-missing.obj").unwrap_err().to_string();
+    assert!(
+        missing.contains("no-such-texture.png: cannot read"),
+        "{missing}"
+    );
+}

@@ -16,6 +16,7 @@
 //! regular files, are refused with the reason.
 
 use crate::scene::{MAX_COORDINATE, Material, Rgb, Scene, SceneError, check_scene_file};
+use crate::texture::{mean, srgb_to_linear};
 use glam::{DMat4, DVec3};
 use std::collections::HashMap;
 use std::path::Path;
@@ -160,8 +161,8 @@ fn material_of(
     converted.validate().map(|()| converted)
 }
 
-/// The mean colour of an image's texels, linear (8- and 16-bit channels are sRGB-decoded, as
-/// glTF stores colour textures; float channels are linear already). Alpha is ignored.
+/// The mean colour of an image's texels, linear (8- and 16-bit channels sRGB-decoded, float
+/// channels as they are). Alpha is ignored; grey formats spread grey over r, g and b.
 fn linear_mean(image: &gltf::image::Data) -> Result<Rgb, String> {
     use gltf::image::Format;
     let (channels, bytes_per_channel) = match image.format {
@@ -176,11 +177,6 @@ fn linear_mean(image: &gltf::image::Data) -> Result<Rgb, String> {
         Format::R32G32B32FLOAT => (3, 4),
         Format::R32G32B32A32FLOAT => (4, 4),
     };
-    let texel_bytes = channels * bytes_per_channel;
-    let texels = image.pixels.len() / texel_bytes;
-    if texels == 0 {
-        return Err("a texture with no texels".into());
-    }
     let channel = |texel: &[u8], c: usize| -> f64 {
         let at = &texel[c * bytes_per_channel..(c + 1) * bytes_per_channel];
         match bytes_per_channel {
@@ -189,22 +185,13 @@ fn linear_mean(image: &gltf::image::Data) -> Result<Rgb, String> {
             _ => f64::from(f32::from_le_bytes([at[0], at[1], at[2], at[3]])),
         }
     };
-    let mut sum = Rgb::ZERO;
-    for texel in image.pixels.chunks_exact(texel_bytes) {
-        // Grey formats (one or two channels: grey and alpha) spread grey over r, g and b.
-        sum += match channels {
-            1 | 2 => Rgb::splat(channel(texel, 0)),
-            _ => Rgb::new(channel(texel, 0), channel(texel, 1), channel(texel, 2)),
-        };
-    }
-    Ok(sum / texels as f64)
-}
-
-/// The sRGB transfer function inverted (IEC 61966-2-1).
-fn srgb_to_linear(encoded: f64) -> f64 {
-    if encoded <= 0.04045 {
-        encoded / 12.92
-    } else {
-        ((encoded + 0.055) / 1.055).powf(2.4)
-    }
+    mean(
+        image
+            .pixels
+            .chunks_exact(channels * bytes_per_channel)
+            .map(|texel| match channels {
+                1 | 2 => Rgb::splat(channel(texel, 0)),
+                _ => Rgb::new(channel(texel, 0), channel(texel, 1), channel(texel, 2)),
+            }),
+    )
 }

@@ -20,6 +20,7 @@ pub mod sampling;
 pub mod scene;
 pub mod session;
 pub mod solve;
+pub mod texture;
 pub mod transport;
 pub mod visibility;
 

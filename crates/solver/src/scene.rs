@@ -378,12 +378,29 @@ impl Scene {
         let checked: Vec<Material> = materials
             .iter()
             .map(|m| {
-                let rgb = |c: Option<[f32; 3]>| {
-                    c.map(|c| Rgb::from(c.map(f64::from))).unwrap_or(Rgb::ZERO)
+                let rgb = |c: Option<[f32; 3]>, absent: Rgb| {
+                    c.map(|c| Rgb::from(c.map(f64::from))).unwrap_or(absent)
+                };
+                // map_Kd: Kd (1 when absent) times the texture's linear mean; its options come
+                // before the file name, which is the last word.
+                let texture = match m
+                    .diffuse_texture
+                    .as_deref()
+                    .and_then(|t| t.split_whitespace().last())
+                {
+                    Some(name) => {
+                        let folder = mtl_path.parent().unwrap_or(Path::new("."));
+                        Some(crate::texture::file_mean(&folder.join(name))?)
+                    }
+                    None => None,
+                };
+                let reflectance = match texture {
+                    Some(mean) => rgb(m.diffuse, Rgb::ONE) * mean,
+                    None => rgb(m.diffuse, Rgb::ZERO),
                 };
                 let material = Material {
-                    reflectance: rgb(m.diffuse),
-                    emission: rgb(m.emissive),
+                    reflectance,
+                    emission: rgb(m.emissive, Rgb::ZERO),
                 };
                 material
                     .validate()
