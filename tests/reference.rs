@@ -119,10 +119,11 @@ fn a_solve_with_exact_probes_has_no_error_and_a_wrong_one_does() {
         ..Default::default()
     };
     let solved = solve_scene(scene.clone(), &request, &solver::no_progress).unwrap();
-    // Exact probes: 2 everywhere. Emitting faces do not count, so make the floor dark.
+    // Exact probes: 2 everywhere, placed over every face (all emit). Probes on emitting faces
+    // do not count, so make the floor dark: only the floor's count.
     let mut dark_floor = scene.clone();
     dark_floor.faces[0].emission = Rgb::ZERO;
-    let exact: Vec<Probe> = place_probes(&dark_floor, 50, 2)
+    let exact: Vec<Probe> = place_probes(&scene, 50, 2)
         .into_iter()
         .map(|(face, p)| Probe {
             position: p.to_array(),
@@ -156,4 +157,31 @@ fn a_solve_with_exact_probes_has_no_error_and_a_wrong_one_does() {
         (error.flat.rms - 0.5).abs() < 1e-6 && (error.smooth.energy + 0.5).abs() < 1e-6,
         "{error:?}"
     );
+}
+
+#[test]
+fn probes_go_only_where_the_error_is_measured_not_on_emitters() {
+    // A sky nine times the floor's area: every probe still lands on the floor.
+    let mut scene = solver::Scene::default();
+    add_rect(
+        &mut scene,
+        "sky",
+        dvec3(0.0, 5.0, 0.0),
+        dvec3(0.0, 0.0, 3.0),
+        dvec3(3.0, 0.0, 0.0),
+        grey(0.0, 1.0),
+    );
+    add_rect(
+        &mut scene,
+        "floor",
+        dvec3(1.0, 0.0, 1.0),
+        dvec3(1.0, 0.0, 0.0),
+        dvec3(0.0, 0.0, 1.0),
+        grey(0.5, 0.0),
+    );
+    let probes = place_probes(&scene, 500, 3);
+    assert!(probes.iter().all(|(face, _)| *face == 1));
+    // A scene of emitters only keeps its probes on them.
+    scene.faces[1].emission = Rgb::splat(1.0);
+    assert_eq!(place_probes(&scene, 500, 3).len(), 500);
 }

@@ -68,9 +68,17 @@ fn running_sums(values: impl Iterator<Item = f64>) -> Vec<f64> {
         .collect()
 }
 
-/// `count` points spread uniformly by area over the scene's faces.
+/// `count` points spread uniformly by area over the scene's faces that do not emit: the error
+/// measures count only those ([`crate::accuracy`]; an emitter's own emission is exact), and a
+/// sky over a model would otherwise take most of them. All faces when every face emits.
 pub fn place_probes(scene: &Scene, count: usize, seed: u64) -> Vec<(u32, DVec3)> {
-    let cumulative = running_sums(scene.faces.iter().map(|f| f.polygon.area()));
+    let reflecting_only = !scene.faces.iter().all(|f| f.emission.max_element() > 0.0);
+    let cumulative = running_sums(scene.faces.iter().map(|f| {
+        match reflecting_only && f.emission.max_element() > 0.0 {
+            true => 0.0,
+            false => f.polygon.area(),
+        }
+    }));
     let mut rng = Pcg64Mcg::seed_from_u64(seed);
     (0..count)
         .map(|_| {
