@@ -350,6 +350,7 @@ fn report_for_viewers(report: &solver::SolveReport) -> SolveReport {
             refinement_iterations: h.refinement_iterations,
             knob_used: h.knob_used,
             leaf_budget_reached: h.leaf_budget_reached,
+            link_budget_reached: h.link_budget_reached,
         }),
     }
 }

@@ -61,6 +61,11 @@ pub struct HierarchyArgs {
     /// JSON says `leaf_budget_reached` when refinement stopped there.
     #[arg(long, env = "RADCAST_MAX_LEAVES", default_value_t = HierarchySettings::default().max_leaves)]
     pub max_leaves: usize,
+    /// With --method hierarchical: links at most, about (bounds memory where links per leaf
+    /// run high, about 250 bytes a link); the JSON says `link_budget_reached` when refinement
+    /// stopped there.
+    #[arg(long, env = "RADCAST_MAX_LINKS", default_value_t = HierarchySettings::default().max_links)]
+    pub max_links: usize,
 }
 
 impl SolveArgs {
@@ -79,9 +84,13 @@ impl HierarchyArgs {
         if self.max_leaves == 0 {
             return Err("--max-leaves must be at least 1".into());
         }
+        if self.max_links == 0 {
+            return Err("--max-links must be at least 1".into());
+        }
         Ok(HierarchySettings {
             error: self.error,
             max_leaves: self.max_leaves,
+            max_links: self.max_links,
             ..HierarchySettings::default()
         })
     }
@@ -143,8 +152,8 @@ pub fn budget_warnings(asked: &HierarchySettings, stats: &HierarchyStats) -> Vec
     let mut warnings = Vec::new();
     if stats.knob_used > asked.error {
         warnings.push(format!(
-            "--error {} needs more than --max-leaves {} leaves here; refined at --error {} instead",
-            asked.error, asked.max_leaves, stats.knob_used
+            "--error {} needs more than --max-leaves {} leaves or --max-links {} links here; refined at --error {} instead",
+            asked.error, asked.max_leaves, asked.max_links, stats.knob_used
         ));
     }
     if stats.leaf_budget_reached {
@@ -152,6 +161,12 @@ pub fn budget_warnings(asked: &HierarchySettings, stats: &HierarchyStats) -> Vec
             "element splits stopped at {} leaves, where the next ones would have passed \
              --max-leaves {} even at --error {}; some links carry more error than that",
             stats.elements, asked.max_leaves, stats.knob_used
+        ));
+    }
+    if stats.link_budget_reached {
+        warnings.push(format!(
+            "links stopped splitting at {} links, past --max-links {} even at --error {}; some carry more error than that",
+            stats.links, asked.max_links, stats.knob_used
         ));
     }
     warnings

@@ -74,14 +74,14 @@ pub enum Progress<'a> {
         /// Pairs the next generation decides.
         undecided: usize,
     },
-    /// The leaf budget stopped refinement at `knob`; it starts again at `next_knob`.
+    /// A budget stopped refinement at `knob`; it starts again at `next_knob`.
     Coarsening {
         /// The knob abandoned.
         knob: f64,
         /// The knob tried next.
         next_knob: f64,
-        /// The leaf budget that was reached.
-        max_leaves: usize,
+        /// The budget that was reached.
+        limit: Limit,
     },
     /// Something the user should know before waiting for the result.
     Warning {
@@ -93,6 +93,24 @@ pub enum Progress<'a> {
         /// Radiosity per patch, W/m^2; not yet converged.
         radiosity: &'a [Rgb],
     },
+}
+
+/// A budget of hierarchical refinement ([`HierarchySettings`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Limit {
+    /// Leaves at most.
+    Leaves(usize),
+    /// Links at most.
+    Links(usize),
+}
+
+impl std::fmt::Display for Limit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Limit::Leaves(n) => write!(f, "{n} leaves (--max-leaves)"),
+            Limit::Links(n) => write!(f, "{n} links (--max-links)"),
+        }
+    }
 }
 
 impl Progress<'_> {
@@ -121,10 +139,10 @@ impl Progress<'_> {
             Progress::Coarsening {
                 knob,
                 next_knob,
-                max_leaves,
-            } => format!(
-                "refinement at error {knob} passed {max_leaves} leaves (--max-leaves): starting again at {next_knob}"
-            ),
+                limit,
+            } => {
+                format!("refinement at error {knob} passed {limit}: starting again at {next_knob}")
+            }
             Progress::Warning { text } => text.to_string(),
             Progress::Estimate { .. } => return None,
         })

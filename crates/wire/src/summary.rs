@@ -100,4 +100,7 @@ pub struct HierarchyCounts {
     pub knob_used: f64,
     /// Whether refinement stopped at the leaf budget.
     pub leaf_budget_reached: bool,
+    /// Whether refinement stopped at the link budget (absent from servers before it existed).
+    #[serde(default)]
+    pub link_budget_reached: bool,
 }

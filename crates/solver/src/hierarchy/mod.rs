@@ -41,15 +41,15 @@ mod tree;
 #[cfg(test)]
 pub(crate) mod fixtures;
 
-use crate::Progress;
 use crate::geometry::Polygon;
 use crate::pair::FormFactorSettings;
 use crate::scene::{Rgb, Scene};
 use crate::solve::{NeedsEntries, SolveOutcome, SolverSettings, System, solve};
 use crate::visibility::Occluders;
+use crate::{Limit, Progress};
 use operator::{Incoming, Slope};
 use rayon::prelude::*;
-use refine::{LeafBudget, Overflow, RefineRun, RefineTarget, Refinement};
+use refine::{Budget, Overflow, RefineRun, RefineTarget, Refinement};
 use tree::Node;
 
 /// The one accuracy knob of the hierarchical path, and the budget that bounds its memory.
@@ -64,9 +64,15 @@ pub struct HierarchySettings {
     pub max_rounds: usize,
     /// Leaves at most. A refinement that would pass it starts again at twice the knob (reported
     /// as [`HierarchyStats::knob_used`]); past a knob of 0.5, elements stop splitting instead
-    /// ([`HierarchyStats::leaf_budget_reached`]). Memory runs about 2.3 KB per leaf (links and
-    /// the solver's vectors included), so the default stays near 1.2 GB.
+    /// ([`HierarchyStats::leaf_budget_reached`]). A leaf costs about 2.3 KB with the ten or so
+    /// links a room scene gives it, so the default stays near 1.2 GB.
     pub max_leaves: usize,
+    /// Links at most, about: the bound on memory where links per leaf run high (a model of many
+    /// small faces made 85 a leaf, 4.1 GB at 354k leaves). Passing it restarts at twice the
+    /// knob like the leaves; past 0.5 no pair splits further
+    /// ([`HierarchyStats::link_budget_reached`]), so the last generation of pairs may add to it.
+    /// About 250 bytes a link, all told (docs/BENCHMARKS.md).
+    pub max_links: usize,
 }
 
 impl Default for HierarchySettings {
@@ -75,6 +81,7 @@ impl Default for HierarchySettings {
             error: 0.03,
             max_rounds: 4,
             max_leaves: 500_000,
+            max_links: 10_000_000,
         }
     }
 }
@@ -126,6 +133,9 @@ pub struct HierarchyStats {
     /// Whether elements stopped splitting at [`HierarchySettings::max_leaves`] even at the
     /// coarsest knob tried, leaving some links coarser than it asks.
     pub leaf_budget_reached: bool,
+    /// Whether links stopped splitting at [`HierarchySettings::max_links`] even at the coarsest
+    /// knob tried.
+    pub link_budget_reached: bool,
 }
 
 /// The element and cluster trees of a scene, their links, and the link operator on the leaves.
@@ -242,25 +252,27 @@ impl Hierarchy {
         };
         let mut knob = settings.error;
         loop {
-            // Over the leaf budget, the whole refinement again at twice the knob: stopping one
+            // Over a budget, the whole refinement again at twice the knob: stopping one
             // part-way leaves whichever elements came first fine and the rest coarse (the
             // furnished room at knob 0.03 stopped so ran 17% RMS; refined at 0.2 it runs 9%).
             // Past 0.5 there is nothing coarser to try, and elements stop splitting instead.
-            let budget = LeafBudget {
+            let budget = Budget {
                 max_leaves: settings.max_leaves,
+                max_links: settings.max_links,
                 overflow: if 2.0 * knob < 1.0 {
                     Overflow::Abandon
                 } else {
                     Overflow::Freeze
                 },
             };
-            if let Some(refined) = run.refine(tree.clone(), knob, budget)? {
-                return Ok(refined);
-            }
+            let limit = match run.refine(tree.clone(), knob, budget)? {
+                Ok(refined) => return Ok(refined),
+                Err(limit) => limit,
+            };
             progress(Progress::Coarsening {
                 knob,
                 next_knob: 2.0 * knob,
-                max_leaves: settings.max_leaves,
+                limit,
             });
             knob *= 2.0;
         }
@@ -288,14 +300,14 @@ struct Rounds<'a> {
 
 impl Rounds<'_> {
     /// Refines `hierarchy` (unrefined, indexed) at error `knob`: first on the ambient estimate,
-    /// then on each new solution until no link needs refining or the rounds run out. `None`
-    /// when the leaf budget abandoned the attempt.
+    /// then on each new solution until no link needs refining or the rounds run out; or the
+    /// budget that abandoned the attempt.
     fn refine(
         &self,
         mut hierarchy: Hierarchy,
         knob: f64,
-        budget: LeafBudget,
-    ) -> Result<Option<Refined>, NeedsEntries> {
+        budget: Budget,
+    ) -> Result<Result<Refined, Limit>, NeedsEntries> {
         let smallest = MIN_RADIUS_PER_ERROR * knob;
         let mut radiosity: Vec<Rgb> = (0..hierarchy.leaves.len())
             .map(|i| {
@@ -345,14 +357,14 @@ impl Rounds<'_> {
                 },
             );
             hierarchy.stats.rounds = round + 1;
-            if refinement == Refinement::Abandoned {
-                return Ok(None);
+            if let Refinement::Abandoned(limit) = refinement {
+                return Ok(Err(limit));
             }
             hierarchy.index(self.occluders);
             radiosity = hierarchy.inherit(inherited, before);
         }
         hierarchy.stats.knob_used = knob;
-        Ok(Some(Refined {
+        Ok(Ok(Refined {
             hierarchy,
             radiosity,
         }))
@@ -384,11 +396,17 @@ mod tests {
     /// Builds at `error` within `max_leaves`; returns the stats and every progress line but
     /// the estimates, in order.
     fn build_with(scene: &Scene, error: f64, max_leaves: usize) -> (HierarchyStats, Vec<String>) {
-        let settings = HierarchySettings {
-            error,
-            max_leaves,
-            ..HierarchySettings::default()
-        };
+        build_within(
+            scene,
+            HierarchySettings {
+                error,
+                max_leaves,
+                ..HierarchySettings::default()
+            },
+        )
+    }
+
+    fn build_within(scene: &Scene, settings: HierarchySettings) -> (HierarchyStats, Vec<String>) {
         let occluders = Occluders::new(scene);
         let rays = FormFactorSettings::default();
         let solver = SolverSettings::default();
@@ -450,5 +468,52 @@ mod tests {
         assert!(!stats.leaf_budget_reached);
         assert_eq!(stats.elements, 6);
         assert!(stats.links > 0);
+    }
+
+    #[test]
+    fn a_tight_link_budget_coarsens_the_knob_then_stops_pairs_splitting() {
+        let unbounded = build_with(&closed_cube(), 0.1, 1_000_000).0;
+        let max_links = unbounded.links / 10;
+        let (stats, lines) = build_within(
+            &closed_cube(),
+            HierarchySettings {
+                error: 0.1,
+                max_links,
+                ..HierarchySettings::default()
+            },
+        );
+        let restarts: Vec<_> = lines
+            .iter()
+            .filter(|l| l.contains("starting again"))
+            .collect();
+        assert_eq!(
+            restarts,
+            [0.1, 0.2, 0.4]
+                .map(|k| format!(
+                    "refinement at error {k} passed {max_links} links (--max-links): starting again at {}",
+                    2.0 * k
+                ))
+                .iter()
+                .collect::<Vec<_>>(),
+        );
+        // At 0.8 the six faces link to each other unsplit.
+        assert_eq!((stats.knob_used, stats.links), (0.8, 30));
+        assert!(!stats.link_budget_reached);
+        // From 0.5 on nothing coarser is tried: pairs stop splitting, each kept as it is.
+        let room = super::fixtures::room_with_a_box();
+        let free = build_with(&room, 0.5, 1_000_000).0;
+        let (frozen, _) = build_within(
+            &room,
+            HierarchySettings {
+                error: 0.5,
+                max_links: 10,
+                ..HierarchySettings::default()
+            },
+        );
+        assert_eq!((frozen.knob_used, frozen.link_budget_reached), (0.5, true));
+        assert!(
+            frozen.links < free.links && frozen.elements <= free.elements,
+            "{frozen:?} against {free:?}"
+        );
     }
 }

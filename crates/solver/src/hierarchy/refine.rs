@@ -6,11 +6,11 @@ use super::factor::{kernel_centre, tangent_coordinates};
 use super::shaft::Visibility;
 use super::tree::{MAX_DEPTH, Node};
 use super::{Hierarchy, Link};
-use crate::Progress;
 use crate::pair::FormFactorSettings;
 use crate::sampling::pair_seed;
 use crate::scene::Rgb;
 use crate::visibility::Occluders;
+use crate::{Limit, Progress};
 use rayon::prelude::*;
 use std::sync::atomic::AtomicU64;
 
@@ -53,10 +53,11 @@ pub(super) struct RefineTarget {
     pub(super) smallest: f64,
 }
 
-/// The most leaves refinement may make, and what it does when a round would pass them.
+/// The most leaves and links refinement may make, and what it does when it would pass them.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct LeafBudget {
+pub(super) struct Budget {
     pub(super) max_leaves: usize,
+    pub(super) max_links: usize,
     pub(super) overflow: Overflow,
 }
 
@@ -64,18 +65,18 @@ pub(super) struct LeafBudget {
 /// link decisions ([`Progress::Refining`], tagged with the knob and round).
 #[derive(Clone, Copy)]
 pub(super) struct RefineRun<'a> {
-    pub(super) budget: LeafBudget,
+    pub(super) budget: Budget,
     pub(super) knob: f64,
     pub(super) round: usize,
     pub(super) progress: &'a (dyn Fn(Progress) + Sync),
 }
 
-/// What to do when a round of splits would pass the leaf budget.
+/// What to do when a round of splits would pass a budget.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Overflow {
     /// Stop at once: the caller starts again at a coarser knob.
     Abandon,
-    /// Go on without element splits.
+    /// Go on without element splits (leaves), or without any split (links).
     Freeze,
 }
 
@@ -84,8 +85,8 @@ pub(super) enum Overflow {
 pub(super) enum Refinement {
     /// Every pending link was kept, dropped or split to the end.
     Finished,
-    /// The leaf budget stopped it part-way ([`Overflow::Abandon`]).
-    Abandoned,
+    /// A budget stopped it part-way ([`Overflow::Abandon`]).
+    Abandoned(Limit),
 }
 
 /// Read-only state for deciding links in parallel.
@@ -177,6 +178,18 @@ impl Hierarchy {
         let budget = run.budget;
         let (mut leaves, mut rays_cast, mut shaft_decided) = (self.leaves.len(), 0, 0);
         while !pending.is_empty() {
+            // Links now plus pairs still to decide: what the links would be with no more splits.
+            if self.links.len() + pending.len() > budget.max_links {
+                if budget.overflow == Overflow::Abandon {
+                    return Refinement::Abandoned(Limit::Links(budget.max_links));
+                }
+                self.stats.link_budget_reached = true;
+            }
+            // Past the link budget no pair splits: each is kept as it is (or dropped unseen).
+            let tolerance = match self.stats.link_budget_reached {
+                true => f64::INFINITY,
+                false => target.tolerance,
+            };
             let mut decide = |pairs: &[(u32, u32)], frozen: bool| {
                 let refiner = Refiner {
                     hierarchy: self,
@@ -184,7 +197,7 @@ impl Hierarchy {
                     rays,
                     sources: &sources,
                     target: RefineTarget {
-                        tolerance: target.tolerance,
+                        tolerance,
                         smallest: smallest_while(frozen, target.smallest),
                     },
                     rays_cast: AtomicU64::new(0),
@@ -206,7 +219,7 @@ impl Hierarchy {
                     leaves += new_leaves;
                 } else if budget.overflow == Overflow::Abandon {
                     self.stats.leaf_budget_reached = true;
-                    return Refinement::Abandoned;
+                    return Refinement::Abandoned(Limit::Leaves(budget.max_leaves));
                 } else {
                     // Over budget: the pairs that asked for element splits decide again without
                     // them.
