@@ -90,10 +90,14 @@ pub enum Rejected {
     Mismatch(String),
 }
 
-/// Where the entry for `digest` lives in `dir`.
+/// The scene id viewers see (hello, `/api/solution`): the digest's first 8 bytes.
+pub fn scene_id(digest: &[u8; DIGEST_BYTES]) -> u64 {
+    u64::from_le_bytes(digest[..8].try_into().expect("8 bytes"))
+}
+
+/// Where the entry for `digest` lives in `dir`: named by the scene id, as viewers see it.
 pub fn entry_path(dir: &Path, digest: &[u8; DIGEST_BYTES]) -> PathBuf {
-    let name: String = digest[..8].iter().map(|b| format!("{b:02x}")).collect();
-    dir.join(format!("{name}.radcast"))
+    dir.join(format!("{:016x}.radcast", scene_id(digest)))
 }
 
 /// Reads the entry for `digest` from `dir`: its geometry and values, once proven.

@@ -176,9 +176,13 @@ fn connection_cap(asked: usize) -> usize {
     };
     let fits = files.saturating_sub(RESERVED_DESCRIPTORS) as usize;
     if asked > fits {
-        tracing::warn!(
-            "--max-connections {asked} lowered to {fits}: the open-file limit is {files}"
-        );
+        // Only a cap the operator chose is worth a warning; the default just fits itself.
+        let line =
+            format!("--max-connections {asked} lowered to {fits}: the open-file limit is {files}");
+        match asked == Limits::default().max_connections {
+            true => tracing::info!("{line}"),
+            false => tracing::warn!("{line}"),
+        }
     }
     asked.min(fits)
 }

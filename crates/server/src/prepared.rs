@@ -31,7 +31,7 @@ pub struct Prepared {
 pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepared> {
     let scene = Scene::load(scene_path)?;
     let digest = crate::cache::scene_digest(&scene, &request);
-    let scene_id = u64::from_le_bytes(digest[..8].try_into().expect("32 bytes"));
+    let scene_id = crate::cache::scene_id(&digest);
     let mesh = match &request.hierarchy {
         Some(_) => Mesh::build(&scene, PatchTarget::EdgeLength(f64::INFINITY)),
         None => solver::pipeline::dense_mesh(&scene, &request)?,
