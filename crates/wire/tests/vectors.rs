@@ -1,0 +1,268 @@
+//! Cross-language conformance: every message kind, compressed and not, and hostile variants,
+//! written by this crate into `tests/vectors/` with what each decodes to
+//! (`tests/vectors/expected.json`). This test holds the Rust encoder and decoder to the
+//! checked-in files; `crates/server/web/protocol.test.mjs` holds the JavaScript decoder to the
+//! same files. After a deliberate protocol change: `RADCAST_WRITE_VECTORS=1 cargo test -p
+//! radcast-wire --test vectors`, then review the diff.
+
+use serde_json::{Value, json};
+use std::path::PathBuf;
+use wire::*;
+
+fn folder() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../tests/vectors"))
+}
+
+fn info(version: u64, vertex_count: u32, scale: f32, is_final: bool) -> FrameInfo {
+    FrameInfo {
+        solution_version: version,
+        sent_at_unix_micros: 1_764_000_000_000_000 + version,
+        scale,
+        vertex_count,
+        is_final,
+    }
+}
+
+/// What a decoded message is, as the JavaScript test reads it (u64s as decimal strings).
+fn describe(message: &ServerMessage) -> Value {
+    let frame = |info: &FrameInfo| {
+        json!({
+            "solution_version": info.solution_version.to_string(),
+            "sent_at": info.sent_at_unix_micros.to_string(),
+            "scale": info.scale,
+            "vertex_count": info.vertex_count,
+            "is_final": info.is_final,
+        })
+    };
+    match message {
+        ServerMessage::Hello(h) => json!({
+            "kind": "hello",
+            "protocol_version": h.protocol_version,
+            "scene_id": h.scene_id.to_string(),
+            "geometry_version": h.geometry_version.to_string(),
+            "vertex_count": h.vertex_count,
+        }),
+        ServerMessage::Full(f) => json!({
+            "kind": "full",
+            "info": frame(&f.info),
+            "colours": f.colours,
+            "checksum": checksum(&f.colours),
+            "radiosity_of_first": decode_colour(f.colours[0], f.info.scale),
+        }),
+        ServerMessage::Delta(d) => json!({
+            "kind": "delta",
+            "base_version": d.base_version.to_string(),
+            "info": frame(&d.info),
+            "indices": d.indices,
+            "colours": d.colours,
+        }),
+        ServerMessage::GeometryChanged { geometry_version } => json!({
+            "kind": "geometry-changed",
+            "geometry_version": geometry_version.to_string(),
+        }),
+    }
+}
+
+fn describe_geometry(g: &Geometry) -> Value {
+    json!({
+        "positions": g.positions,
+        "patches": g.patches,
+        "patch_objects": g.patch_objects,
+        "objects": g.objects,
+        "camera": g.camera.map(|c| json!({
+            "eye": c.eye, "target": c.target, "up": c.up,
+            "vertical_fov_degrees": c.vertical_fov_degrees,
+        })),
+    })
+}
+
+/// Every vector: (file stem, bytes, what it must decode to — or `"refused"`).
+fn vectors() -> Vec<(&'static str, Vec<u8>, Value)> {
+    let smooth: Vec<u32> = (0..600)
+        .map(|i| encode_colour([1.0 + (i / 100) as f32, 0.5, 0.25], 1.0))
+        .collect();
+    let noisy: Vec<u32> = (0..64u32)
+        .map(|i| i.wrapping_mul(2_654_435_761) ^ 0x5bd1_e995)
+        .collect();
+    let messages = [
+        (
+            "hello",
+            ServerMessage::Hello(Hello {
+                protocol_version: PROTOCOL_VERSION,
+                scene_id: 0xfedc_ba98_7654_3210,
+                geometry_version: 3,
+                vertex_count: 600,
+            }),
+        ),
+        (
+            "full-lz4",
+            ServerMessage::Full(FullFrame {
+                info: info(5, 600, 0.25, true),
+                colours: smooth.clone(),
+            }),
+        ),
+        (
+            "full-raw",
+            ServerMessage::Full(FullFrame {
+                info: info(6, 64, 2.0f32.powi(-20), false),
+                colours: noisy,
+            }),
+        ),
+        (
+            "delta-raw",
+            ServerMessage::Delta(DeltaFrame {
+                base_version: 5,
+                info: info(6, 600, 0.25, false),
+                indices: vec![0, 1, 200, 599],
+                colours: vec![7, 0x7fff_ffff, 9, 0],
+            }),
+        ),
+        (
+            "delta-lz4",
+            ServerMessage::Delta(DeltaFrame {
+                base_version: 6,
+                info: info(7, 600, 0.25, true),
+                indices: (100..400).collect(),
+                colours: vec![smooth[0]; 300],
+            }),
+        ),
+        (
+            "delta-empty-final",
+            ServerMessage::Delta(DeltaFrame {
+                base_version: 7,
+                info: info(8, 600, 0.25, true),
+                indices: vec![],
+                colours: vec![],
+            }),
+        ),
+        (
+            "geometry-changed",
+            ServerMessage::GeometryChanged {
+                geometry_version: 4,
+            },
+        ),
+    ];
+    let mut out: Vec<(&'static str, Vec<u8>, Value)> = messages
+        .iter()
+        .map(|(name, m)| (*name, m.encode(), describe(m)))
+        .collect();
+    let geometry = Geometry {
+        positions: vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.5],
+        ],
+        patches: vec![[0, 1, 2, 3], [0, 2, 3, geometry::NO_CORNER]],
+        patch_objects: vec![0, 1],
+        objects: vec!["floor".into(), "lämp".into()],
+        camera: Some(Camera {
+            eye: [0.5, 0.5, -2.0],
+            target: [0.5, 0.5, 0.0],
+            up: [0.0, 1.0, 0.0],
+            vertical_fov_degrees: 39.3,
+        }),
+    };
+    out.push(("geometry", geometry.encode(), describe_geometry(&geometry)));
+    let bare = Geometry {
+        camera: None,
+        ..geometry.clone()
+    };
+    out.push((
+        "geometry-no-camera",
+        bare.encode(),
+        describe_geometry(&bare),
+    ));
+    out.push((
+        "request-full",
+        ClientMessage::RequestFull.encode(),
+        json!({"kind": "request-full"}),
+    ));
+    // Hostile variants of the above: each must be refused by every decoder.
+    let bytes = |name: &str| out.iter().find(|v| v.0 == name).unwrap().1.clone();
+    let mut refused = vec![];
+    let mut old_version = bytes("hello");
+    old_version[2] = 1;
+    refused.push(("refused-hello-version-1", old_version));
+    let full = bytes("full-raw");
+    refused.push(("refused-full-truncated", full[..full.len() - 1].to_vec()));
+    let mut zero_scale = full.clone();
+    zero_scale[18..22].copy_from_slice(&0f32.to_le_bytes());
+    refused.push(("refused-full-scale-zero", zero_scale));
+    let mut huge_scale = full.clone();
+    huge_scale[18..22].copy_from_slice(&1e34f32.to_le_bytes());
+    refused.push(("refused-full-scale-overflows", huge_scale));
+    let mut flags = full;
+    flags[1] |= 0x80;
+    refused.push(("refused-unknown-flags", flags));
+    let mut past_end = bytes("delta-raw");
+    past_end[30..34].copy_from_slice(&599u32.to_le_bytes()); // vertex_count 599: index 599 is out
+    refused.push(("refused-delta-index-out-of-range", past_end));
+    let lz4 = bytes("full-lz4");
+    refused.push(("refused-lz4-truncated", lz4[..lz4.len() - 3].to_vec()));
+    refused.push(("refused-unknown-kind", vec![9, 0]));
+    let mut geometry_bad = bytes("geometry");
+    let last = geometry_bad.len() - 1 - 40; // the camera tag
+    geometry_bad[last] = 7;
+    refused.push(("refused-geometry-camera-tag", geometry_bad));
+    out.extend(
+        refused
+            .into_iter()
+            .map(|(name, b)| (name, b, Value::from("refused"))),
+    );
+    out
+}
+
+/// Vectors decoded as `/api/scene` geometry rather than as WebSocket messages.
+fn is_geometry(name: &str) -> bool {
+    matches!(name, "geometry" | "geometry-no-camera")
+}
+
+#[test]
+fn the_checked_in_vectors_are_what_this_crate_writes_and_reads() {
+    let vectors = vectors();
+    let expected: serde_json::Map<String, Value> = vectors
+        .iter()
+        .map(|(name, _, value)| (name.to_string(), value.clone()))
+        .collect();
+    if std::env::var_os("RADCAST_WRITE_VECTORS").is_some() {
+        std::fs::create_dir_all(folder()).unwrap();
+        for (name, bytes, _) in &vectors {
+            std::fs::write(folder().join(format!("{name}.bin")), bytes).unwrap();
+        }
+        let text = serde_json::to_string_pretty(&Value::Object(expected.clone())).unwrap();
+        std::fs::write(folder().join("expected.json"), text + "\n").unwrap();
+    }
+    let checked_in: Value = serde_json::from_str(
+        &std::fs::read_to_string(folder().join("expected.json"))
+            .expect("tests/vectors/expected.json"),
+    )
+    .unwrap();
+    assert_eq!(
+        checked_in,
+        Value::Object(expected),
+        "expected.json is stale"
+    );
+    for (name, bytes, value) in &vectors {
+        let file = std::fs::read(folder().join(format!("{name}.bin"))).expect(name);
+        assert_eq!(&file, bytes, "{name}.bin is not what the encoder writes");
+        // And the Rust decoders read the files to the same values.
+        let decoded = if is_geometry(name) {
+            Geometry::decode(&file).map(|g| describe_geometry(&g)).ok()
+        } else if *name == "request-full" {
+            ClientMessage::decode(&file)
+                .ok()
+                .map(|_| json!({"kind": "request-full"}))
+        } else {
+            ServerMessage::decode(&file).map(|m| describe(&m)).ok()
+        };
+        let refused = name.starts_with("refused");
+        let refused_everywhere = ServerMessage::decode(&file).is_err()
+            && Geometry::decode(&file).is_err()
+            && ClientMessage::decode(&file).is_err();
+        match refused {
+            true => assert!(refused_everywhere, "{name} decodes"),
+            false => assert_eq!(decoded.as_ref(), Some(value), "{name}"),
+        }
+    }
+}
