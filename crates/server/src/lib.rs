@@ -9,6 +9,7 @@ pub mod health;
 pub mod hub;
 pub mod listen;
 pub mod metrics;
+pub mod page;
 pub mod prepared;
 pub mod routes;
 pub mod solving;

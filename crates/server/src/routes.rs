@@ -17,7 +17,7 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use wire::SolutionSummary;
 
-/// The router: `/healthz`, `/api/scene`, `/api/scene.glb`, `/api/solution`, `/ws`, `/metrics`,
+/// The router: the browser viewer at `/`, `/healthz`, `/api/scene`, `/api/scene.glb`, `/api/solution`, `/ws`, `/metrics`,
 /// and the control API `PUT /api/objects/{name}/emission` and `.../transform` (bearer token).
 pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
@@ -29,6 +29,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/metrics", get(metrics))
         .route("/api/objects/{name}/emission", put(set_emission))
         .route("/api/objects/{name}/transform", put(set_transform))
+        .merge(crate::page::routes())
         .with_state(shared)
 }
 

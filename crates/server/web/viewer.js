@@ -1,0 +1,257 @@
+// The browser viewer: fetches the geometry once, follows the WebSocket stream with the
+// protocol decoder, and draws the vertex radiosity with WebGL2 the way the headless client
+// does (linear radiosity interpolated over fan triangles, Reinhard tone map per pixel, sRGB).
+
+import { ColourBuffer, checksum, decodeColour, decodeGeometry, decodeServerMessage, encodeRequestFull } from "./protocol.js";
+import { exposure, fanTriangles } from "./display.js";
+
+const canvas = document.getElementById("view");
+const status = document.getElementById("status");
+const exposureInput = document.getElementById("exposure");
+const gl = canvas.getContext("webgl2", { antialias: true });
+
+const state = {
+  geometry: null,
+  geometryVersion: null,
+  buffer: new ColourBuffer(),
+  bytes: 0,
+  latencyMs: null,
+  serverChecksum: null,
+  connected: false,
+  camera: null, // {target, distance, yaw, pitch, up, fov}
+};
+
+const VERTEX = `#version 300 es
+in vec3 position;
+in vec3 radiance;
+uniform mat4 viewProjection;
+out vec3 exposed;
+void main() { exposed = radiance; gl_Position = viewProjection * vec4(position, 1.0); }`;
+const FRAGMENT = `#version 300 es
+precision highp float;
+in vec3 exposed;
+out vec4 colour;
+vec3 srgb(vec3 c) { return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c)); }
+void main() { vec3 x = max(exposed, 0.0); colour = vec4(srgb(x / (1.0 + x)), 1.0); }`;
+
+function shader(type, source) {
+  const s = gl.createShader(type);
+  gl.shaderSource(s, source);
+  gl.compileShader(s);
+  if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
+  return s;
+}
+
+const program = gl.createProgram();
+gl.attachShader(program, shader(gl.VERTEX_SHADER, VERTEX));
+gl.attachShader(program, shader(gl.FRAGMENT_SHADER, FRAGMENT));
+gl.linkProgram(program);
+const positionBuffer = gl.createBuffer();
+const radianceBuffer = gl.createBuffer();
+const indexBuffer = gl.createBuffer();
+let indexCount = 0;
+
+function setGeometry(geometry) {
+  state.geometry = geometry;
+  gl.bindBuffer(gl.ARRAY_BUFFER, positionBuffer);
+  gl.bufferData(gl.ARRAY_BUFFER, geometry.positions, gl.STATIC_DRAW);
+  const triangles = fanTriangles(geometry.patches);
+  gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, indexBuffer);
+  gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, triangles, gl.STATIC_DRAW);
+  indexCount = triangles.length;
+  if (!state.camera) state.camera = cameraFor(geometry);
+}
+
+/** The scene's own camera, or one framing its bounds from -z (as the headless client). */
+function cameraFor(geometry) {
+  const p = geometry.positions;
+  const lo = [Infinity, Infinity, Infinity];
+  const hi = [-Infinity, -Infinity, -Infinity];
+  for (let i = 0; i < p.length; i++) {
+    lo[i % 3] = Math.min(lo[i % 3], p[i]);
+    hi[i % 3] = Math.max(hi[i % 3], p[i]);
+  }
+  const centre = lo.map((l, k) => 0.5 * (l + hi[k]));
+  const radius = Math.max(0.5 * Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]), 1e-30);
+  const c = geometry.camera;
+  const eye = c ? c.eye : [centre[0], centre[1], centre[2] - 1.1 * radius / Math.sin((45 * Math.PI) / 360)];
+  const target = c ? c.target : centre;
+  const d = eye.map((e, k) => e - target[k]);
+  const distance = Math.hypot(d[0], d[1], d[2]);
+  return {
+    target: [...target],
+    distance,
+    yaw: Math.atan2(d[0], d[2]),
+    pitch: Math.asin(d[1] / distance),
+    fov: c ? c.verticalFovDegrees : 45,
+    radius,
+  };
+}
+
+function viewProjection(camera, aspect) {
+  const { target, distance, yaw, pitch, fov } = camera;
+  const eye = [
+    target[0] + distance * Math.cos(pitch) * Math.sin(yaw),
+    target[1] + distance * Math.sin(pitch),
+    target[2] + distance * Math.cos(pitch) * Math.cos(yaw),
+  ];
+  const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+  const norm = (a) => { const l = Math.hypot(a[0], a[1], a[2]); return a.map((x) => x / l); };
+  const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  const f = norm(sub(target, eye));
+  const s = norm(cross(f, [0, 1, 0]));
+  const u = cross(s, f);
+  const near = Math.max(distance * 1e-3, 1e-30);
+  const far = distance + 4 * camera.radius;
+  const t = 1 / Math.tan((fov * Math.PI) / 360);
+  // Column-major: projection * view.
+  const view = [s[0], u[0], -f[0], 0, s[1], u[1], -f[1], 0, s[2], u[2], -f[2], 0, -dot(s, eye), -dot(u, eye), dot(f, eye), 1];
+  const proj = [t / aspect, 0, 0, 0, 0, t, 0, 0, 0, 0, (far + near) / (near - far), -1, 0, 0, (2 * far * near) / (near - far), 0];
+  const out = new Float32Array(16);
+  for (let c = 0; c < 4; c++) for (let r = 0; r < 4; r++) {
+    let sum = 0;
+    for (let k = 0; k < 4; k++) sum += proj[4 * k + r] * view[4 * c + k];
+    out[4 * c + r] = sum;
+  }
+  return out;
+}
+
+/** Uploads the current colours, decoded and exposed: the fragment shader tone-maps them. */
+function uploadColours() {
+  const { geometry, buffer } = state;
+  if (!geometry || !buffer.info || buffer.colours.length !== geometry.positions.length / 3) return;
+  const radiosity = new Float32Array(buffer.colours.length * 3);
+  buffer.colours.forEach((code, v) => radiosity.set(decodeColour(code, buffer.info.scale), 3 * v));
+  const k = exposure(geometry.positions, geometry.patches, radiosity) * 2 ** Number(exposureInput.value);
+  for (let i = 0; i < radiosity.length; i++) radiosity[i] *= k;
+  gl.bindBuffer(gl.ARRAY_BUFFER, radianceBuffer);
+  gl.bufferData(gl.ARRAY_BUFFER, radiosity, gl.DYNAMIC_DRAW);
+  draw();
+}
+
+function draw() {
+  const width = Math.round(canvas.clientWidth * devicePixelRatio);
+  const height = Math.round(canvas.clientHeight * devicePixelRatio);
+  if (canvas.width !== width || canvas.height !== height) { canvas.width = width; canvas.height = height; }
+  gl.viewport(0, 0, width, height);
+  gl.clearColor(0, 0, 0, 1);
+  gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+  if (!state.camera || !indexCount || !state.buffer.info) return;
+  gl.enable(gl.DEPTH_TEST);
+  gl.useProgram(program);
+  gl.uniformMatrix4fv(gl.getUniformLocation(program, "viewProjection"), false, viewProjection(state.camera, width / height));
+  const attribute = (name, buffer) => {
+    const at = gl.getAttribLocation(program, name);
+    gl.bindBuffer(gl.ARRAY_BUFFER, buffer);
+    gl.enableVertexAttribArray(at);
+    gl.vertexAttribPointer(at, 3, gl.FLOAT, false, 0, 0);
+  };
+  attribute("position", positionBuffer);
+  attribute("radiance", radianceBuffer);
+  gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, indexBuffer);
+  gl.drawElements(gl.TRIANGLES, indexCount, gl.UNSIGNED_INT, 0);
+}
+
+function showStatus() {
+  const info = state.buffer.info;
+  const local = info ? checksum(state.buffer.colours) : null;
+  const verified = state.serverChecksum === null ? "" : local === state.serverChecksum ? " ✓ matches /api/solution" : " ✗ differs from /api/solution";
+  status.textContent = [
+    state.connected ? "connected" : "reconnecting…",
+    info ? `version ${info.solutionVersion}${info.isFinal ? " (final)" : ""}` : "waiting for a frame",
+    state.geometry ? `${state.geometry.positions.length / 3} vertices, ${state.geometry.patches.length / 4} patches` : "",
+    `${(state.bytes / 1024).toFixed(1)} KiB received`,
+    state.latencyMs === null ? "" : `latency ${state.latencyMs.toFixed(0)} ms`,
+    local === null ? "" : `checksum ${local.toString(16).padStart(8, "0")}${verified}`,
+  ].filter(Boolean).join(" · ");
+  document.body.dataset.checksum = local === null ? "" : String(local);
+  document.body.dataset.final = info && info.isFinal ? "true" : "false";
+  document.body.dataset.version = info ? String(info.solutionVersion) : "";
+}
+
+async function fetchGeometry(version) {
+  // A move may land between the notice and the fetch: fetch until the versions agree.
+  for (;;) {
+    const response = await fetch("/api/scene");
+    const geometry = decodeGeometry(new Uint8Array(await response.arrayBuffer()));
+    const fetched = BigInt(response.headers.get("x-radcast-geometry-version") || "0");
+    if (version === null || fetched >= version) return [geometry, fetched];
+  }
+}
+
+async function checkWithServer() {
+  const summary = await (await fetch("/api/solution")).json();
+  state.serverChecksum = state.buffer.info && BigInt(summary.solution_version) === state.buffer.info.solutionVersion ? summary.checksum : null;
+  showStatus();
+}
+
+function connect() {
+  const socket = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`);
+  socket.binaryType = "arraybuffer";
+  let queue = Promise.resolve();
+  socket.onopen = () => { state.connected = true; showStatus(); };
+  socket.onmessage = (event) => {
+    const bytes = new Uint8Array(event.data);
+    // Messages apply in order, geometry fetches included.
+    queue = queue.then(async () => {
+      state.bytes += bytes.length;
+      const message = decodeServerMessage(bytes);
+      if (message.kind === "hello" || message.kind === "geometry-changed") {
+        if (state.geometryVersion !== message.geometryVersion) {
+          const [geometry, version] = await fetchGeometry(message.geometryVersion);
+          setGeometry(geometry);
+          state.geometryVersion = version;
+        }
+        return;
+      }
+      if (!state.buffer.apply(message)) {
+        socket.send(encodeRequestFull());
+        return;
+      }
+      state.latencyMs = Date.now() - Number(message.info.sentAt / 1000n);
+      state.serverChecksum = null;
+      uploadColours();
+      showStatus();
+      if (message.info.isFinal) await checkWithServer();
+    }).catch((error) => { status.textContent = `error: ${error.message}`; socket.close(); });
+  };
+  socket.onclose = () => {
+    state.connected = false;
+    state.buffer = new ColourBuffer();
+    showStatus();
+    setTimeout(connect, 1000);
+  };
+}
+
+// Orbit (drag), pan (shift-drag or right-drag), zoom (wheel); one finger orbits, two zoom.
+let drag = null;
+canvas.addEventListener("contextmenu", (e) => e.preventDefault());
+canvas.addEventListener("pointerdown", (e) => { drag = { x: e.clientX, y: e.clientY, pan: e.shiftKey || e.button === 2 }; canvas.setPointerCapture(e.pointerId); });
+canvas.addEventListener("pointerup", () => { drag = null; });
+canvas.addEventListener("pointermove", (e) => {
+  if (!drag || !state.camera) return;
+  const dx = e.clientX - drag.x;
+  const dy = e.clientY - drag.y;
+  drag.x = e.clientX;
+  drag.y = e.clientY;
+  const c = state.camera;
+  if (drag.pan) {
+    const step = (c.distance * 2 * Math.tan((c.fov * Math.PI) / 360)) / canvas.clientHeight;
+    const right = [Math.cos(c.yaw), 0, -Math.sin(c.yaw)];
+    c.target = c.target.map((t, k) => t - right[k] * dx * step + (k === 1 ? dy * step : 0));
+  } else {
+    c.yaw -= dx * 0.005;
+    c.pitch = Math.max(-1.5, Math.min(1.5, c.pitch + dy * 0.005));
+  }
+  draw();
+});
+canvas.addEventListener("wheel", (e) => {
+  e.preventDefault();
+  if (state.camera) { state.camera.distance *= Math.exp(e.deltaY * 0.001); draw(); }
+}, { passive: false });
+exposureInput.addEventListener("input", () => uploadColours());
+window.addEventListener("resize", draw);
+
+showStatus();
+connect();
