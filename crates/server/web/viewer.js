@@ -9,6 +9,13 @@ const canvas = document.getElementById("view");
 const status = document.getElementById("status");
 const exposureInput = document.getElementById("exposure");
 const gl = canvas.getContext("webgl2", { antialias: true });
+// `?width=W&height=H` draws at a fixed size in CSS pixels (as `radcast-client view --width
+// --height`), for exact comparisons; otherwise the canvas fills the window.
+const query = new URLSearchParams(location.search);
+if (query.has("width") && query.has("height")) {
+  canvas.style.width = `${Number(query.get("width"))}px`;
+  canvas.style.height = `${Number(query.get("height"))}px`;
+}
 
 const state = {
   geometry: null,
@@ -135,6 +142,8 @@ function draw() {
   const height = Math.round(canvas.clientHeight * devicePixelRatio);
   if (canvas.width !== width || canvas.height !== height) { canvas.width = width; canvas.height = height; }
   gl.viewport(0, 0, width, height);
+  // For tests and tools: the drawing's size in device pixels.
+  document.body.dataset.canvas = `${width}x${height}`;
   gl.clearColor(0, 0, 0, 1);
   gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
   if (!state.camera || !indexCount || !state.buffer.info) return;
