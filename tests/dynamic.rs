@@ -187,6 +187,21 @@ async fn an_emission_change_reaches_every_viewer_as_a_delta_equal_to_a_fresh_sol
         assert!(!v.deltas.is_empty(), "the edit arrives as a delta");
     }
     assert_eq!(viewers[0].buffer.colours, viewers[1].buffer.colours);
+    // /api/objects lists every object with the emission the solution has now.
+    let (status, body) = get(address, "/api/objects").await;
+    assert_eq!(status, 200);
+    let objects: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let emission = |name: &str| {
+        objects
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|o| o["name"] == name)
+            .map(|o| o["emission"].clone())
+    };
+    assert_eq!(emission("light"), Some(serde_json::json!([5.0, 4.0, 3.0])));
+    assert_eq!(emission("floor"), Some(serde_json::json!([0.0, 0.0, 0.0])));
+    assert_eq!(objects.as_array().unwrap().len(), 8, "{objects}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

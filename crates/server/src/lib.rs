@@ -86,6 +86,8 @@ pub struct Shared {
     pub tasks: tokio_util::task::TaskTracker,
     /// Faults the solver thread reported.
     pub health: health::Health,
+    /// Every object's emission as the published solution has it (W/m^2), in scene order.
+    pub emissions: std::sync::Mutex<Vec<(String, [f64; 3])>>,
 }
 
 impl Shared {
@@ -106,6 +108,7 @@ impl Shared {
             ),
             tasks: Default::default(),
             health: Default::default(),
+            emissions: Default::default(),
         })
     }
 }

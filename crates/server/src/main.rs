@@ -2,7 +2,7 @@
 
 use anyhow::Context;
 use clap::Parser;
-use server::prepared::{emitters, prepare, shared_for};
+use server::prepared::{object_emissions, prepare, shared_for};
 use server::{Limits, listen, solving};
 use solver::args::SolveArgs;
 use std::io::Write;
@@ -132,7 +132,11 @@ async fn main() -> anyhow::Result<()> {
         }
     );
     if args.animate {
-        tokio::spawn(animate(shared.clone(), emitters(&prepared)));
+        let emitters = object_emissions(&prepared)
+            .into_iter()
+            .filter(|(_, e)| e.iter().any(|c| *c > 0.0))
+            .collect();
+        tokio::spawn(animate(shared.clone(), emitters));
     }
 
     let cache_dir = (!args.no_cache).then_some(args.cache_dir);

@@ -7,7 +7,7 @@ use axum::response::IntoResponse;
 use axum::routing::get;
 
 /// Each embedded file: its route, content type and text.
-const FILES: [(&str, &str, &str); 4] = [
+const FILES: [(&str, &str, &str); 5] = [
     (
         "/",
         "text/html; charset=utf-8",
@@ -27,6 +27,11 @@ const FILES: [(&str, &str, &str); 4] = [
         "/display.js",
         "text/javascript; charset=utf-8",
         include_str!("../web/display.js"),
+    ),
+    (
+        "/control.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../web/control.js"),
     ),
 ];
 

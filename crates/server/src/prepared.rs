@@ -102,22 +102,25 @@ pub fn hub_for(prepared: &Prepared) -> Hub {
 
 /// Everything a server needs for one scene: the shared state, ready for [`crate::routes::router`].
 pub fn shared_for(prepared: &Prepared, limits: crate::Limits, token: String) -> Arc<Shared> {
-    Shared::new(hub_for(prepared), limits, token)
+    let shared = Shared::new(hub_for(prepared), limits, token);
+    *shared.emissions.lock().expect("emissions lock") = object_emissions(prepared);
+    shared
 }
 
-/// The emitting objects and their emission as loaded, for animations.
-pub fn emitters(prepared: &Prepared) -> Vec<(String, [f64; 3])> {
-    let mut found: Vec<(String, [f64; 3])> = Vec::new();
-    for patch in prepared
-        .mesh
-        .patches
+/// Every object's emission as loaded (its first face's; W/m^2), in scene order.
+pub fn object_emissions(prepared: &Prepared) -> Vec<(String, [f64; 3])> {
+    let scene = &prepared.scene;
+    let mut emissions: Vec<(String, [f64; 3])> = scene
+        .objects
         .iter()
-        .filter(|p| p.emission.max_element() > 0.0)
-    {
-        let name = &prepared.scene.objects[patch.object as usize].name;
-        if !found.iter().any(|(n, _)| n == name) {
-            found.push((name.clone(), patch.emission.to_array()));
+        .map(|o| (o.name.clone(), [0.0; 3]))
+        .collect();
+    let mut seen = vec![false; scene.objects.len()];
+    for face in &scene.faces {
+        let object = face.object as usize;
+        if !std::mem::replace(&mut seen[object], true) {
+            emissions[object].1 = face.emission.to_array();
         }
     }
-    found
+    emissions
 }

@@ -17,7 +17,7 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use wire::SolutionSummary;
 
-/// The router: the browser viewer at `/`, `/healthz`, `/api/scene`, `/api/scene.glb`, `/api/solution`, `/ws`, `/metrics`,
+/// The router: the browser viewer at `/`, `/healthz`, `/api/scene`, `/api/scene.glb`, `/api/solution`, `/api/objects`, `/ws`, `/metrics`,
 /// and the control API `PUT /api/objects/{name}/emission` and `.../transform` (bearer token).
 pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
@@ -25,6 +25,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/scene", get(scene))
         .route("/api/scene.glb", get(scene_glb))
         .route("/api/solution", get(solution))
+        .route("/api/objects", get(objects))
         .route("/ws", get(websocket))
         .route("/metrics", get(metrics))
         .route("/api/objects/{name}/emission", put(set_emission))
@@ -87,6 +88,16 @@ pub fn solution_summary(shared: &Shared) -> SolutionSummary {
         scale: current.scale,
         report: shared.report.lock().ok().and_then(|r| r.clone()),
     }
+}
+
+/// Every object and its current emission: `[{"name": …, "emission": [r, g, b]}]`.
+async fn objects(State(shared): State<Arc<Shared>>) -> Response {
+    let emissions = shared.emissions.lock().expect("emissions lock").clone();
+    let list: Vec<serde_json::Value> = emissions
+        .into_iter()
+        .map(|(name, emission)| serde_json::json!({ "name": name, "emission": emission }))
+        .collect();
+    axum::Json(list).into_response()
 }
 
 async fn solution(State(shared): State<Arc<Shared>>) -> Response {

@@ -275,8 +275,14 @@ fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) -> 
             .replace_geometry(geometry_of(session.scene(), session.mesh()));
     }
     for (object, emission) in &batch.emissions {
-        if let Err(error) = session.set_emission(object, Rgb::from(*emission)) {
-            refused.push(format!("the emission of '{object}' was refused: {error}"));
+        match session.set_emission(object, Rgb::from(*emission)) {
+            Ok(()) => {
+                let mut emissions = shared.emissions.lock().expect("emissions lock");
+                if let Some(entry) = emissions.iter_mut().find(|(name, _)| name == object) {
+                    entry.1 = *emission;
+                }
+            }
+            Err(error) => refused.push(format!("the emission of '{object}' was refused: {error}")),
         }
     }
     let report = session.solve(&solver::no_progress);

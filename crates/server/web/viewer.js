@@ -4,6 +4,7 @@
 
 import { ColourBuffer, checksum, decodeColour, decodeGeometry, decodeServerMessage, encodeRequestFull } from "./protocol.js";
 import { exposure, fanTriangles } from "./display.js";
+import { togglePanel } from "./control.js";
 
 const canvas = document.getElementById("view");
 const status = document.getElementById("status");
@@ -66,7 +67,11 @@ function setGeometry(geometry) {
   gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, indexBuffer);
   gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, triangles, gl.STATIC_DRAW);
   indexCount = triangles.length;
-  if (!state.camera) state.camera = cameraFor(geometry);
+  if (!state.camera) {
+    state.camera = cameraFor(geometry);
+    // `?control` opens the control panel at once.
+    if (query.has("control")) togglePanel(state.camera.radius);
+  }
 }
 
 /** The scene's own camera, or one framing its bounds from -z (as the headless client). */
@@ -260,6 +265,7 @@ canvas.addEventListener("wheel", (e) => {
   if (state.camera) { state.camera.distance *= Math.exp(e.deltaY * 0.001); draw(); }
 }, { passive: false });
 exposureInput.addEventListener("input", () => uploadColours());
+document.getElementById("control-toggle").addEventListener("click", () => togglePanel(state.camera ? state.camera.radius : 1));
 window.addEventListener("resize", draw);
 
 showStatus();
