@@ -142,3 +142,252 @@ async fn the_page_shows_the_final_frame_as_the_headless_client_draws_it() {
         "median {median}, mean {mean:.2}, 99th percentile {p99} over {width}x{height}"
     );
 }
+
+/// A page in headless Chromium, driven over the DevTools protocol.
+struct Page {
+    browser: std::process::Child,
+    socket: tokio_tungstenite::WebSocketStream<
+        tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
+    >,
+    next_id: u64,
+}
+
+impl Page {
+    async fn open(url: &str) -> Page {
+        use std::io::BufRead;
+        let mut browser = Command::new(CHROMIUM)
+            .args(["--headless", "--no-sandbox", "--use-angle=swiftshader"])
+            .args(["--enable-unsafe-swiftshader", "--window-size=640,560"])
+            .args(["--remote-debugging-port=0", url])
+            .stderr(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .expect("chromium starts");
+        let stderr = browser.stderr.take().unwrap();
+        let endpoint = tokio::task::spawn_blocking(move || {
+            std::io::BufReader::new(stderr)
+                .lines()
+                .map_while(Result::ok)
+                .find_map(|l| l.split("DevTools listening on ").nth(1).map(str::to_string))
+                .expect("chromium names its DevTools endpoint")
+        })
+        .await
+        .unwrap();
+        let port = endpoint
+            .split(':')
+            .nth(2)
+            .unwrap()
+            .split('/')
+            .next()
+            .unwrap()
+            .to_string();
+        let targets: serde_json::Value = tokio::task::spawn_blocking(move || {
+            let text = ureq::get(format!("http://127.0.0.1:{port}/json/list"))
+                .call()
+                .unwrap()
+                .into_body()
+                .read_to_string()
+                .unwrap();
+            serde_json::from_str(&text).unwrap()
+        })
+        .await
+        .unwrap();
+        let page = targets
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|t| t["type"] == "page")
+            .expect("a page target");
+        let (socket, _) =
+            tokio_tungstenite::connect_async(page["webSocketDebuggerUrl"].as_str().unwrap())
+                .await
+                .expect("DevTools connects");
+        Page {
+            browser,
+            socket,
+            next_id: 1,
+        }
+    }
+
+    /// Calls a DevTools method and returns its reply (`result` or `error`).
+    async fn call(&mut self, method: &str, params: serde_json::Value) -> serde_json::Value {
+        use futures_util::{SinkExt, StreamExt};
+        let id = self.next_id;
+        self.next_id += 1;
+        let request = serde_json::json!({ "id": id, "method": method, "params": params });
+        self.socket
+            .send(tokio_tungstenite::tungstenite::Message::Text(
+                request.to_string().into(),
+            ))
+            .await
+            .unwrap();
+        loop {
+            let message = tokio::time::timeout(Duration::from_secs(60), self.socket.next())
+                .await
+                .expect("DevTools answers")
+                .expect("open")
+                .expect("a message");
+            if let tokio_tungstenite::tungstenite::Message::Text(text) = message {
+                let reply: serde_json::Value = serde_json::from_str(&text).unwrap();
+                if reply["id"] == id {
+                    return reply;
+                }
+            }
+        }
+    }
+
+    /// Evaluates `expression` in the page (awaiting a promise) and returns its value. A
+    /// navigation under way destroys the context an evaluation started in: it is tried again
+    /// in the new one (a few times).
+    async fn eval(&mut self, expression: &str) -> serde_json::Value {
+        let mut last = serde_json::Value::Null;
+        for _ in 0..5 {
+            last = self
+                .call(
+                    "Runtime.evaluate",
+                    serde_json::json!({ "expression": expression, "awaitPromise": true, "returnByValue": true }),
+                )
+                .await;
+            let failed =
+                last.get("error").is_some() || last["result"].get("exceptionDetails").is_some();
+            if !failed {
+                return last["result"]["result"]["value"].clone();
+            }
+        }
+        panic!("{expression}: {last}")
+    }
+
+    /// Waits in the page until `condition` (a JS expression over `d`, the body's dataset) holds;
+    /// returns the dataset then.
+    async fn until(&mut self, condition: &str) -> serde_json::Value {
+        self.eval(&format!(
+            "new Promise(done => {{ const check = () => {{ const d = document.body.dataset; \
+             if ({condition}) done({{final: d.final, checksum: d.checksum, version: d.version, \
+             geometry: d.geometry, connected: d.connected}}); else setTimeout(check, 10); }}; \
+             check(); }})"
+        ))
+        .await
+    }
+
+    async fn screenshot(&mut self) -> String {
+        self.call("Page.captureScreenshot", serde_json::json!({}))
+            .await["result"]["data"]
+            .as_str()
+            .unwrap()
+            .to_string()
+    }
+}
+
+impl Drop for Page {
+    fn drop(&mut self) {
+        let _ = self.browser.kill();
+        let _ = self.browser.wait();
+    }
+}
+
+/// Serves the Cornell box on `address`, solving in the background, until its `shutdown` is cancelled.
+async fn serve_on(address: std::net::SocketAddr) -> std::sync::Arc<server::Shared> {
+    let request = SolveRequest {
+        patches: PatchTarget::Count(600),
+        ..SolveRequest::default()
+    };
+    let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).unwrap();
+    let shared = shared_for(&prepared, Limits::default(), "t".into());
+    let listener = tokio::net::TcpListener::bind(address)
+        .await
+        .expect("the port is free");
+    tokio::spawn(listen::serve(listener, shared.clone()));
+    solving::start(prepared, shared.clone(), None);
+    shared
+}
+
+async fn put(address: std::net::SocketAddr, path: &str, body: &str) -> u16 {
+    let (url, body) = (format!("http://{address}{path}"), body.to_string());
+    tokio::task::spawn_blocking(move || {
+        ureq::put(&url)
+            .header("Authorization", "Bearer t")
+            .send(body.as_bytes())
+            .map(|r| r.status().as_u16())
+            .unwrap_or(0)
+    })
+    .await
+    .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_follows_edits_moves_and_a_server_restart() {
+    if Command::new(CHROMIUM).arg("--version").output().is_err() {
+        eprintln!("skipped: no `{CHROMIUM}` on this machine (.ci/run installs it)");
+        return;
+    }
+    let address = {
+        let probe = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        probe.local_addr().unwrap()
+    };
+    let shared = serve_on(address).await;
+    let mut page = Page::open(&format!("http://{address}/?width=640&height=480")).await;
+    let first = page.until("d.final === 'true' && d.checksum !== ''").await;
+    let before = page.screenshot().await;
+
+    // An emission edit: the page shows the new final version, and its pixels change.
+    let edited = std::time::Instant::now();
+    assert_eq!(
+        put(
+            address,
+            "/api/objects/light/emission",
+            r#"{"emission": [4, 12, 20]}"#
+        )
+        .await,
+        202
+    );
+    let version = first["version"].as_str().unwrap().parse::<u64>().unwrap();
+    let after_edit = page
+        .until(&format!(
+            "d.final === 'true' && Number(d.version) > {version}"
+        ))
+        .await;
+    let edit_seconds = edited.elapsed().as_secs_f64();
+    assert_eq!(
+        after_edit["checksum"].as_str().unwrap(),
+        shared.hub.current().checksum.to_string()
+    );
+    assert_ne!(page.screenshot().await, before, "the picture changed");
+    eprintln!("emission edit to the page's final picture: {edit_seconds:.3} s");
+    assert!(edit_seconds < 5.0, "{edit_seconds} s");
+
+    // A move: the page fetches the new geometry.
+    assert_eq!(
+        put(
+            address,
+            "/api/objects/short_block/transform",
+            r#"{"translate": [30, 0, 0]}"#
+        )
+        .await,
+        202
+    );
+    let moved = page.until("d.geometry === '2' && d.final === 'true'").await;
+    assert_eq!(
+        moved["checksum"].as_str().unwrap(),
+        shared.hub.current().checksum.to_string()
+    );
+
+    // A restart: the page reconnects to the new server and follows its solution.
+    shared.edits.close();
+    shared.shutdown.cancel();
+    page.until("d.connected === 'false'").await;
+    let restarted = serve_on(address).await;
+    let back = page
+        .until("d.connected === 'true' && d.final === 'true' && d.geometry === '1'")
+        .await;
+    let mut published = restarted.hub.subscribe();
+    tokio::time::timeout(Duration::from_secs(60), published.wait_for(|p| p.is_final))
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(
+        back["checksum"].as_str().unwrap(),
+        restarted.hub.current().checksum.to_string()
+    );
+    restarted.edits.close();
+    restarted.shutdown.cancel();
+}

@@ -182,6 +182,8 @@ function showStatus() {
   document.body.dataset.checksum = local === null ? "" : String(local);
   document.body.dataset.final = info && info.isFinal ? "true" : "false";
   document.body.dataset.version = info ? String(info.solutionVersion) : "";
+  document.body.dataset.geometry = state.geometryVersion === null ? "" : String(state.geometryVersion);
+  document.body.dataset.connected = String(state.connected);
 }
 
 async function fetchGeometry(version) {
