@@ -229,7 +229,13 @@ function connect() {
       state.serverChecksum = null;
       uploadColours();
       showStatus();
-      if (message.info.isFinal) await checkWithServer();
+      if (message.info.isFinal) {
+        if (!document.body.dataset.firstFinalMs) {
+          document.body.dataset.firstFinalMs = performance.now().toFixed(0);
+          if (query.has("frames")) timeFrames(Number(query.get("frames")));
+        }
+        await checkWithServer();
+      }
     }).catch((error) => { status.textContent = `error: ${error.message}`; socket.close(); });
   };
   socket.onclose = () => {
@@ -238,6 +244,21 @@ function connect() {
     showStatus();
     setTimeout(connect, 1000);
   };
+}
+
+/** `?frames=N`: draws N frames, each read back (so finished), and records the median in ms. */
+function timeFrames(count) {
+  const times = [];
+  const pixel = new Uint8Array(4);
+  for (let i = 0; i < count; i++) {
+    const start = performance.now();
+    state.camera.yaw += 0.01;
+    draw();
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);
+    times.push(performance.now() - start);
+  }
+  times.sort((a, b) => a - b);
+  document.body.dataset.frameMs = times[Math.floor(times.length / 2)].toFixed(1);
 }
 
 // Orbit (drag), pan (shift-drag or right-drag), zoom (wheel); one finger orbits, two zoom.
