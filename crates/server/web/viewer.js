@@ -261,18 +261,38 @@ function timeFrames(count) {
   document.body.dataset.frameMs = times[Math.floor(times.length / 2)].toFixed(1);
 }
 
-// Orbit (drag), pan (shift-drag or right-drag), zoom (wheel); one finger orbits, two zoom.
+// Orbit (drag), pan (shift-drag or right-drag), zoom (wheel); on touch one finger orbits and
+// two pinch to zoom.
+const pointers = new Map();
 let drag = null;
 canvas.addEventListener("contextmenu", (e) => e.preventDefault());
-canvas.addEventListener("pointerdown", (e) => { drag = { x: e.clientX, y: e.clientY, pan: e.shiftKey || e.button === 2 }; canvas.setPointerCapture(e.pointerId); });
-canvas.addEventListener("pointerup", () => { drag = null; });
+canvas.addEventListener("pointerdown", (e) => {
+  pointers.set(e.pointerId, [e.clientX, e.clientY]);
+  drag = { x: e.clientX, y: e.clientY, pan: e.shiftKey || e.button === 2 };
+  canvas.setPointerCapture(e.pointerId);
+});
+const release = (e) => { pointers.delete(e.pointerId); drag = null; };
+canvas.addEventListener("pointerup", release);
+canvas.addEventListener("pointercancel", release);
 canvas.addEventListener("pointermove", (e) => {
-  if (!drag || !state.camera) return;
+  if (!state.camera || !pointers.has(e.pointerId)) return;
+  const c = state.camera;
+  if (pointers.size === 2) {
+    const [a, b] = [...pointers.values()];
+    const before = Math.hypot(a[0] - b[0], a[1] - b[1]);
+    pointers.set(e.pointerId, [e.clientX, e.clientY]);
+    const [p, q] = [...pointers.values()];
+    const after = Math.hypot(p[0] - q[0], p[1] - q[1]);
+    if (before > 0 && after > 0) c.distance *= before / after;
+    draw();
+    return;
+  }
+  pointers.set(e.pointerId, [e.clientX, e.clientY]);
+  if (!drag) return;
   const dx = e.clientX - drag.x;
   const dy = e.clientY - drag.y;
   drag.x = e.clientX;
   drag.y = e.clientY;
-  const c = state.camera;
   if (drag.pan) {
     const step = (c.distance * 2 * Math.tan((c.fov * Math.PI) / 360)) / canvas.clientHeight;
     const right = [Math.cos(c.yaw), 0, -Math.sin(c.yaw)];
