@@ -423,6 +423,27 @@ mod tests {
         (stats, lines.into_inner().unwrap())
     }
 
+    /// The progress lines that restart refinement at a coarser knob.
+    fn restarts(lines: &[String]) -> Vec<String> {
+        lines
+            .iter()
+            .filter(|l| l.contains("starting again"))
+            .cloned()
+            .collect()
+    }
+
+    /// What the restarts from 0.1 to 0.8 say when `limit` forces each.
+    fn said_restarts(limit: &str) -> Vec<String> {
+        [0.1, 0.2, 0.4]
+            .map(|k| {
+                format!(
+                    "refinement at error {k} passed {limit}: starting again at {}",
+                    2.0 * k
+                )
+            })
+            .to_vec()
+    }
+
     #[test]
     fn the_knob_asked_for_is_used_when_its_leaves_fit() {
         let (stats, lines) = build_with(&closed_cube(), 0.1, 1_000_000);
@@ -451,20 +472,7 @@ mod tests {
         let (stats, lines) = build_with(&closed_cube(), 0.1, 6);
         assert_eq!(stats.knob_used, 0.8);
         // Each restart is said when it happens, not only at the end.
-        let restarts: Vec<_> = lines
-            .iter()
-            .filter(|l| l.contains("starting again"))
-            .collect();
-        assert_eq!(
-            restarts,
-            [0.1, 0.2, 0.4]
-                .map(|k| format!(
-                    "refinement at error {k} passed 6 leaves (--max-leaves): starting again at {}",
-                    2.0 * k
-                ))
-                .iter()
-                .collect::<Vec<_>>(),
-        );
+        assert_eq!(restarts(&lines), said_restarts("6 leaves (--max-leaves)"));
         assert!(!stats.leaf_budget_reached);
         assert_eq!(stats.elements, 6);
         assert!(stats.links > 0);
@@ -482,19 +490,9 @@ mod tests {
                 ..HierarchySettings::default()
             },
         );
-        let restarts: Vec<_> = lines
-            .iter()
-            .filter(|l| l.contains("starting again"))
-            .collect();
         assert_eq!(
-            restarts,
-            [0.1, 0.2, 0.4]
-                .map(|k| format!(
-                    "refinement at error {k} passed {max_links} links (--max-links): starting again at {}",
-                    2.0 * k
-                ))
-                .iter()
-                .collect::<Vec<_>>(),
+            restarts(&lines),
+            said_restarts(&format!("{max_links} links (--max-links)"))
         );
         // At 0.8 the six faces link to each other unsplit.
         assert_eq!((stats.knob_used, stats.links), (0.8, 30));
