@@ -2,7 +2,7 @@
 
 use anyhow::Context;
 use clap::Parser;
-use server::prepared::{object_emissions, prepare, shared_for};
+use server::prepared::{prepare, shared_for};
 use server::{Limits, listen, solving};
 use solver::args::SolveArgs;
 use std::io::Write;
@@ -132,9 +132,13 @@ async fn main() -> anyhow::Result<()> {
         }
     );
     if args.animate {
-        let emitters = object_emissions(&prepared)
-            .into_iter()
+        let emitters = shared
+            .emissions
+            .lock()
+            .expect("emissions lock")
+            .iter()
             .filter(|(_, e)| e.iter().any(|c| *c > 0.0))
+            .cloned()
             .collect();
         tokio::spawn(animate(shared.clone(), emitters));
     }

@@ -108,7 +108,7 @@ pub fn shared_for(prepared: &Prepared, limits: crate::Limits, token: String) -> 
 }
 
 /// Every object's emission as loaded (its first face's; W/m^2), in scene order.
-pub fn object_emissions(prepared: &Prepared) -> Vec<(String, [f64; 3])> {
+fn object_emissions(prepared: &Prepared) -> Vec<(String, [f64; 3])> {
     let scene = &prepared.scene;
     let mut emissions: Vec<(String, [f64; 3])> = scene
         .objects
