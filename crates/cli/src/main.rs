@@ -10,9 +10,8 @@ use solver::accuracy::evaluate;
 use solver::args::{SolveArgs, SolverArgs, budget_warnings};
 use solver::reference::{Reference, place_probes, trace_probes};
 use solver::visibility::Occluders;
-use solver::{Progress, Scene, SolveReport, solve_file};
+use solver::{Progress, ProgressLine, ProgressThrottle, Scene, SolveReport, solve_file};
 use std::path::PathBuf;
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 /// Counts heap bytes, so that reports can give their peak.
@@ -143,34 +142,25 @@ enum FuzzTarget {
 /// Prints a progress line to stderr at most once a second, after the first second.
 struct ProgressPrinter {
     start: Instant,
-    last: Mutex<Instant>,
+    throttle: ProgressThrottle,
 }
 
 impl ProgressPrinter {
     fn new() -> Self {
-        let now = Instant::now();
         ProgressPrinter {
-            start: now,
-            last: Mutex::new(now),
+            start: Instant::now(),
+            throttle: ProgressThrottle::new(Duration::from_secs(1)),
         }
     }
 
     fn report(&self, progress: Progress) {
-        let Some(line) = progress.describe() else {
-            return;
-        };
-        if progress.is_warning() {
-            eprintln!("warning: {line}");
-            return;
+        match self.throttle.admit(progress) {
+            Some(ProgressLine::Warning(line)) => eprintln!("warning: {line}"),
+            Some(ProgressLine::Status(line)) => {
+                eprintln!("[{:6.1}s] {line}", self.start.elapsed().as_secs_f64())
+            }
+            None => {}
         }
-        let Ok(mut last) = self.last.try_lock() else {
-            return;
-        };
-        if last.elapsed() < Duration::from_secs(1) {
-            return;
-        }
-        *last = Instant::now();
-        eprintln!("[{:6.1}s] {line}", self.start.elapsed().as_secs_f64());
     }
 }
 

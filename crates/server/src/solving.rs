@@ -7,7 +7,7 @@ use crate::cache::{self, CachedSolution, Rejected};
 use crate::health::Fault;
 use crate::prepared::{Prepared, emission_only, geometry_of};
 use glam::DVec3;
-use solver::{MoveWork, Progress, Rgb, Session};
+use solver::{MoveWork, Progress, ProgressLine, ProgressThrottle, Rgb, Session};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -18,16 +18,11 @@ const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(100);
 
 /// Progress of a long solve in the log: a line at most every [`PROGRESS_LOG_INTERVAL`],
 /// warnings (a coarser knob than asked) always.
-#[derive(Debug)]
-struct ProgressLog {
-    last: Mutex<Instant>,
-}
+struct ProgressLog(ProgressThrottle);
 
 impl Default for ProgressLog {
     fn default() -> Self {
-        ProgressLog {
-            last: Mutex::new(Instant::now()),
-        }
+        ProgressLog(ProgressThrottle::new(PROGRESS_LOG_INTERVAL))
     }
 }
 
@@ -36,16 +31,10 @@ const PROGRESS_LOG_INTERVAL: Duration = Duration::from_secs(2);
 
 impl ProgressLog {
     fn report(&self, progress: Progress) {
-        let Some(line) = progress.describe() else {
-            return;
-        };
-        if progress.is_warning() {
-            tracing::warn!("{line}");
-        } else if let Ok(mut last) = self.last.try_lock()
-            && last.elapsed() >= PROGRESS_LOG_INTERVAL
-        {
-            *last = Instant::now();
-            tracing::info!("{line}");
+        match self.0.admit(progress) {
+            Some(ProgressLine::Warning(line)) => tracing::warn!("{line}"),
+            Some(ProgressLine::Status(line)) => tracing::info!("{line}"),
+            None => {}
         }
     }
 }

@@ -155,5 +155,72 @@ impl Progress<'_> {
     }
 }
 
+/// What a person watching a long computation is shown: every warning, and at most one other
+/// line per interval (the first after one interval has passed).
+pub struct ProgressThrottle {
+    interval: std::time::Duration,
+    last: std::sync::Mutex<std::time::Instant>,
+}
+
+/// A progress line to show.
+pub enum ProgressLine {
+    /// Changes what the user gets: show it always.
+    Warning(String),
+    /// Where the computation is.
+    Status(String),
+}
+
+impl ProgressThrottle {
+    /// A throttle letting one status line through per `interval`.
+    pub fn new(interval: std::time::Duration) -> Self {
+        ProgressThrottle {
+            interval,
+            last: std::sync::Mutex::new(std::time::Instant::now()),
+        }
+    }
+
+    /// The line to show for `progress` now, if any.
+    pub fn admit(&self, progress: Progress) -> Option<ProgressLine> {
+        let line = progress.describe()?;
+        if progress.is_warning() {
+            return Some(ProgressLine::Warning(line));
+        }
+        // Progress comes from many threads: a contended lock means a line is being shown.
+        let mut last = self.last.try_lock().ok()?;
+        if last.elapsed() < self.interval {
+            return None;
+        }
+        *last = std::time::Instant::now();
+        Some(ProgressLine::Status(line))
+    }
+}
+
 /// A progress sink that ignores everything.
 pub fn no_progress(_: Progress) {}
+
+#[cfg(test)]
+mod progress_tests {
+    use super::*;
+    use std::time::Duration;
+
+    #[test]
+    fn a_throttle_lets_warnings_through_always_and_status_once_per_interval() {
+        let status = Progress::Solve {
+            iteration: 3,
+            residual: 0.5,
+        };
+        let warning = Progress::Warning { text: "no light" };
+        let slow = ProgressThrottle::new(Duration::from_secs(3600));
+        assert!(
+            slow.admit(status).is_none(),
+            "not before an interval has passed"
+        );
+        assert!(matches!(slow.admit(warning), Some(ProgressLine::Warning(t)) if t == "no light"));
+        assert!(slow.admit(Progress::Estimate { radiosity: &[] }).is_none());
+        let eager = ProgressThrottle::new(Duration::ZERO);
+        assert!(matches!(
+            eager.admit(status),
+            Some(ProgressLine::Status(t)) if t == "solve: iteration 3, residual 5.000e-1"
+        ));
+    }
+}
