@@ -26,7 +26,7 @@ const state = {
   latencyMs: null,
   serverChecksum: null,
   connected: false,
-  camera: null, // {target, distance, yaw, pitch, up, fov}
+  camera: null, // {target, offset (eye - target), up, fov, radius}
 };
 
 const VERTEX = `#version 300 es
@@ -74,7 +74,22 @@ function setGeometry(geometry) {
   }
 }
 
-/** The scene's own camera, or one framing its bounds from -z (as the headless client). */
+const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+const add = (a, b) => [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
+const scale = (a, k) => [a[0] * k, a[1] * k, a[2] * k];
+const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+const normalize = (a) => scale(a, 1 / Math.hypot(a[0], a[1], a[2]));
+/** `v` turned by `angle` radians about the unit `axis` (Rodrigues). */
+const rotate = (v, axis, angle) => {
+  const [c, s] = [Math.cos(angle), Math.sin(angle)];
+  return add(add(scale(v, c), scale(cross(axis, v), s)), scale(axis, dot(axis, v) * (1 - c)));
+};
+
+/**
+ * The scene's own camera (eye, target, up, fov), or one framing its bounds from -z with +y up,
+ * as the headless client frames it. Orbiting turns the eye about the target around `up`.
+ */
 function cameraFor(geometry) {
   const p = geometry.positions;
   const lo = [Infinity, Infinity, Infinity];
@@ -87,33 +102,28 @@ function cameraFor(geometry) {
   const radius = Math.max(0.5 * Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]), 1e-30);
   const c = geometry.camera;
   const eye = c ? c.eye : [centre[0], centre[1], centre[2] - 1.1 * radius / Math.sin((45 * Math.PI) / 360)];
-  const target = c ? c.target : centre;
-  const d = eye.map((e, k) => e - target[k]);
-  const distance = Math.hypot(d[0], d[1], d[2]);
+  const target = c ? [...c.target] : centre;
   return {
-    target: [...target],
-    distance,
-    yaw: Math.atan2(d[0], d[2]),
-    pitch: Math.asin(d[1] / distance),
+    target,
+    offset: sub(eye, target),
+    up: normalize(c ? c.up : [0, 1, 0]),
     fov: c ? c.verticalFovDegrees : 45,
     radius,
   };
 }
 
+/** The camera's orthonormal basis: `s` right, `u` up, `f` forward. */
+function basis(camera) {
+  const f = normalize(scale(camera.offset, -1));
+  const s = normalize(cross(f, camera.up));
+  return { s, u: cross(s, f), f };
+}
+
 function viewProjection(camera, aspect) {
-  const { target, distance, yaw, pitch, fov } = camera;
-  const eye = [
-    target[0] + distance * Math.cos(pitch) * Math.sin(yaw),
-    target[1] + distance * Math.sin(pitch),
-    target[2] + distance * Math.cos(pitch) * Math.cos(yaw),
-  ];
-  const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-  const norm = (a) => { const l = Math.hypot(a[0], a[1], a[2]); return a.map((x) => x / l); };
-  const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-  const f = norm(sub(target, eye));
-  const s = norm(cross(f, [0, 1, 0]));
-  const u = cross(s, f);
+  const { target, offset, fov } = camera;
+  const eye = add(target, offset);
+  const distance = Math.hypot(offset[0], offset[1], offset[2]);
+  const { s, u, f } = basis(camera);
   const near = Math.max(distance * 1e-3, 1e-30);
   const far = distance + 4 * camera.radius;
   const t = 1 / Math.tan((fov * Math.PI) / 360);
@@ -127,6 +137,15 @@ function viewProjection(camera, aspect) {
     out[4 * c + r] = sum;
   }
   return out;
+}
+
+/** Orbits: `yaw` about the up axis, `pitch` about the view's right, never over a pole. */
+function orbit(camera, yaw, pitch) {
+  const turned = rotate(camera.offset, camera.up, yaw);
+  const right = normalize(cross(camera.up, turned));
+  const tilted = rotate(turned, right, pitch);
+  const cosine = dot(normalize(tilted), camera.up);
+  camera.offset = Math.abs(cosine) < 0.995 ? tilted : turned;
 }
 
 /** Uploads the current colours, decoded and exposed: the fragment shader tone-maps them. */
@@ -252,7 +271,7 @@ function timeFrames(count) {
   const pixel = new Uint8Array(4);
   for (let i = 0; i < count; i++) {
     const start = performance.now();
-    state.camera.yaw += 0.01;
+    orbit(state.camera, 0.01, 0);
     draw();
     gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);
     times.push(performance.now() - start);
@@ -283,7 +302,7 @@ canvas.addEventListener("pointermove", (e) => {
     pointers.set(e.pointerId, [e.clientX, e.clientY]);
     const [p, q] = [...pointers.values()];
     const after = Math.hypot(p[0] - q[0], p[1] - q[1]);
-    if (before > 0 && after > 0) c.distance *= before / after;
+    if (before > 0 && after > 0) c.offset = scale(c.offset, before / after);
     draw();
     return;
   }
@@ -294,18 +313,18 @@ canvas.addEventListener("pointermove", (e) => {
   drag.x = e.clientX;
   drag.y = e.clientY;
   if (drag.pan) {
-    const step = (c.distance * 2 * Math.tan((c.fov * Math.PI) / 360)) / canvas.clientHeight;
-    const right = [Math.cos(c.yaw), 0, -Math.sin(c.yaw)];
-    c.target = c.target.map((t, k) => t - right[k] * dx * step + (k === 1 ? dy * step : 0));
+    const distance = Math.hypot(c.offset[0], c.offset[1], c.offset[2]);
+    const step = (distance * 2 * Math.tan((c.fov * Math.PI) / 360)) / canvas.clientHeight;
+    const { s, u } = basis(c);
+    c.target = add(c.target, add(scale(s, -dx * step), scale(u, dy * step)));
   } else {
-    c.yaw -= dx * 0.005;
-    c.pitch = Math.max(-1.5, Math.min(1.5, c.pitch + dy * 0.005));
+    orbit(c, -dx * 0.005, -dy * 0.005);
   }
   draw();
 });
 canvas.addEventListener("wheel", (e) => {
   e.preventDefault();
-  if (state.camera) { state.camera.distance *= Math.exp(e.deltaY * 0.001); draw(); }
+  if (state.camera) { state.camera.offset = scale(state.camera.offset, Math.exp(e.deltaY * 0.001)); draw(); }
 }, { passive: false });
 exposureInput.addEventListener("input", () => uploadColours());
 document.getElementById("control-toggle").addEventListener("click", () => togglePanel(state.camera ? state.camera.radius : 1));
