@@ -8,9 +8,21 @@ use server::prepared::{prepare, shared_for};
 use server::{Limits, listen, solving};
 use solver::{PatchTarget, SolveRequest};
 use std::process::Command;
+use std::sync::Arc;
 use std::time::Duration;
 
 const CHROMIUM: &str = "chromium";
+
+/// Whether Chromium is absent, said on stderr: the browser tests then skip.
+fn chromium_missing() -> bool {
+    let missing = Command::new(CHROMIUM).arg("--version").output().is_err();
+    if missing {
+        eprintln!(
+            "skipped: no `{CHROMIUM}` on this machine (Debian: apt-get install chromium; .ci/run installs it)"
+        );
+    }
+    missing
+}
 
 /// The value of `data-NAME="…"` on the page's body in `dom`.
 fn body_data(dom: &str, name: &str) -> Option<String> {
@@ -36,10 +48,7 @@ fn chromium(url: &str, extra: &[&str]) -> String {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_page_shows_the_final_frame_as_the_headless_client_draws_it() {
-    if Command::new(CHROMIUM).arg("--version").output().is_err() {
-        eprintln!(
-            "skipped: no `{CHROMIUM}` on this machine (Debian: apt-get install chromium; .ci/run installs it)"
-        );
+    if chromium_missing() {
         return;
     }
     compare_page_with_client("scenes/cornell-box.obj".as_ref()).await;
@@ -66,21 +75,10 @@ async fn the_page_shows_the_final_frame_as_the_headless_client_draws_it() {
 /// Serves `scene`, lets headless Chromium show it, and compares the page with the headless
 /// client's picture of the same frame at the same camera and size.
 async fn compare_page_with_client(scene: &std::path::Path) {
-    let request = SolveRequest {
-        patches: PatchTarget::Count(600),
-        ..SolveRequest::default()
-    };
-    let prepared = prepare(scene, request).unwrap();
-    let shared = shared_for(&prepared, Limits::default(), "t".into());
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let address = listener.local_addr().unwrap();
-    tokio::spawn(listen::serve(listener, shared.clone()));
-    solving::start(prepared, shared.clone(), None);
-    let mut published = shared.hub.subscribe();
-    tokio::time::timeout(Duration::from_secs(60), published.wait_for(|p| p.is_final))
-        .await
-        .expect("the solve ends")
-        .unwrap();
+    let shared = serve(scene, listener);
+    until_final(&shared).await;
 
     // A fixed canvas size, so both runs and the client draw the same pixels.
     let url = format!("http://{address}/?width=640&height=480");
@@ -312,20 +310,35 @@ impl Drop for Page {
     }
 }
 
-/// Serves the Cornell box on `address`, solving in the background, until its `shutdown` is cancelled.
-async fn serve_on(address: std::net::SocketAddr) -> std::sync::Arc<server::Shared> {
+/// Serves `scene` (600 patches) on `listener`, solving in the background, until its
+/// `shutdown` is cancelled.
+fn serve(scene: &std::path::Path, listener: tokio::net::TcpListener) -> Arc<server::Shared> {
     let request = SolveRequest {
         patches: PatchTarget::Count(600),
         ..SolveRequest::default()
     };
-    let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).unwrap();
+    let prepared = prepare(scene, request).unwrap();
     let shared = shared_for(&prepared, Limits::default(), "t".into());
-    let listener = tokio::net::TcpListener::bind(address)
-        .await
-        .expect("the port is free");
     tokio::spawn(listen::serve(listener, shared.clone()));
     solving::start(prepared, shared.clone(), None);
     shared
+}
+
+/// Waits until `shared` has published its final solution.
+async fn until_final(shared: &server::Shared) {
+    let mut published = shared.hub.subscribe();
+    tokio::time::timeout(Duration::from_secs(60), published.wait_for(|p| p.is_final))
+        .await
+        .expect("the solve ends")
+        .unwrap();
+}
+
+/// Serves the Cornell box on `address` (see [`serve`]).
+async fn serve_on(address: std::net::SocketAddr) -> Arc<server::Shared> {
+    let listener = tokio::net::TcpListener::bind(address)
+        .await
+        .expect("the port is free");
+    serve("scenes/cornell-box.obj".as_ref(), listener)
 }
 
 async fn put(address: std::net::SocketAddr, path: &str, body: &str) -> u16 {
@@ -343,8 +356,7 @@ async fn put(address: std::net::SocketAddr, path: &str, body: &str) -> u16 {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_page_follows_edits_moves_and_a_server_restart() {
-    if Command::new(CHROMIUM).arg("--version").output().is_err() {
-        eprintln!("skipped: no `{CHROMIUM}` on this machine (.ci/run installs it)");
+    if chromium_missing() {
         return;
     }
     let address = {
@@ -420,11 +432,7 @@ async fn the_page_follows_edits_moves_and_a_server_restart() {
     let back = page
         .until("d.connected === 'true' && d.final === 'true' && d.geometry === '1'")
         .await;
-    let mut published = restarted.hub.subscribe();
-    tokio::time::timeout(Duration::from_secs(60), published.wait_for(|p| p.is_final))
-        .await
-        .unwrap()
-        .unwrap();
+    until_final(&restarted).await;
     assert_eq!(
         back["checksum"].as_str().unwrap(),
         restarted.hub.current().checksum.to_string()
