@@ -165,7 +165,7 @@ async fn compare_page_with_client(scene: &std::path::Path) {
         "{}: median {median}, mean {mean:.2}, 99th percentile {p99} over {width}x{height}",
         scene.display()
     );
-    shared.shutdown.cancel();
+    shared.process.shutdown.cancel();
 }
 
 /// A page in headless Chromium, driven over the DevTools protocol.
@@ -426,7 +426,7 @@ async fn the_page_follows_edits_moves_and_a_server_restart() {
 
     // A restart: the page reconnects to the new server and follows its solution.
     shared.edits.close();
-    shared.shutdown.cancel();
+    shared.process.shutdown.cancel();
     page.until("d.connected === 'false'").await;
     let restarted = serve_on(address).await;
     let back = page

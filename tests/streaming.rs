@@ -269,7 +269,7 @@ async fn a_stalled_viewer_neither_delays_others_nor_holds_memory() {
         );
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
-    assert_eq!(shared.viewers.open(), 1);
+    assert_eq!(shared.process.viewers.open(), 1);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -342,7 +342,7 @@ async fn viewers_past_the_limit_are_refused_cleanly() {
         .await
         .expect_err("third is refused");
     assert!(refused.to_string().contains("503"), "{refused}");
-    assert_eq!(shared.viewers.refused(Refusal::ServerFull), 1);
+    assert_eq!(shared.process.viewers.refused(Refusal::ServerFull), 1);
     let text = server::metrics::render(&shared);
     assert!(
         text.contains("radcast_viewers 2\n")
@@ -367,7 +367,7 @@ async fn one_address_past_its_limit_is_refused_and_its_slots_come_back() {
         .await
         .expect_err("third from one address");
     assert!(refused.to_string().contains("429"), "{refused}");
-    assert_eq!(shared.viewers.refused(Refusal::AddressFull), 1);
+    assert_eq!(shared.process.viewers.refused(Refusal::AddressFull), 1);
     // When one leaves, its place is free again.
     drop(a);
     let deadline = tokio::time::Instant::now() + PATIENCE;
@@ -671,8 +671,8 @@ async fn sockets_that_trickle_headers_are_capped_and_closed_and_others_are_serve
         "{answer}"
     );
     let refusals = (
-        shared.connections.refused(Refusal::AddressFull),
-        shared.connections.refused(Refusal::ServerFull),
+        shared.process.connections.refused(Refusal::AddressFull),
+        shared.process.connections.refused(Refusal::ServerFull),
     );
     assert_eq!(refusals, (1, 1));
 }

@@ -14,11 +14,25 @@ pub enum Fault {
     CacheWrite,
     /// The solver thread ended: edits can no longer be applied. Never cleared.
     SolverStopped,
+    /// NATS could not be reached or refused a write (origin: publishing; edge: reading).
+    Nats,
+    /// An edge has not heard its origin for [`crate::fanout::SILENT_AFTER`]: it serves the
+    /// last solution it got.
+    OriginSilent,
+    /// An edge's origin reports a fault of its own.
+    Origin,
 }
 
 impl Fault {
     /// Every kind, in `/metrics` order.
-    pub const ALL: [Fault; 3] = [Fault::Edit, Fault::CacheWrite, Fault::SolverStopped];
+    pub const ALL: [Fault; 6] = [
+        Fault::Edit,
+        Fault::CacheWrite,
+        Fault::SolverStopped,
+        Fault::Nats,
+        Fault::OriginSilent,
+        Fault::Origin,
+    ];
 
     /// The label used in `/metrics`.
     pub fn label(self) -> &'static str {
@@ -26,6 +40,9 @@ impl Fault {
             Fault::Edit => "edit",
             Fault::CacheWrite => "cache_write",
             Fault::SolverStopped => "solver_stopped",
+            Fault::Nats => "nats",
+            Fault::OriginSilent => "origin_silent",
+            Fault::Origin => "origin",
         }
     }
 }
@@ -49,19 +66,25 @@ pub struct Health {
 }
 
 impl Health {
-    /// Records a fault of `kind` (logged as an error), replacing the message of the last one.
+    /// Records a fault of `kind`, replacing the message of the last one. A fault that begins
+    /// (none of its kind present) is counted and logged as an error; one that goes on with a
+    /// new message is logged as a warning, and with the same message not again.
     pub fn fault(&self, kind: Fault, message: String) {
-        tracing::error!("{message}");
-        *self
-            .totals
-            .lock()
-            .expect("health lock")
-            .entry(kind)
-            .or_insert(0) += 1;
-        self.state
-            .lock()
-            .expect("health lock")
-            .insert(kind, message);
+        let mut state = self.state.lock().expect("health lock");
+        match state.get(&kind) {
+            None => {
+                tracing::error!("{message}");
+                *self
+                    .totals
+                    .lock()
+                    .expect("health lock")
+                    .entry(kind)
+                    .or_insert(0) += 1;
+            }
+            Some(old) if *old != message => tracing::warn!("{message}"),
+            Some(_) => {}
+        }
+        state.insert(kind, message);
     }
 
     /// Records that work of `kind` succeeded, clearing its fault (a stopped solver stays stopped).
@@ -71,7 +94,12 @@ impl Health {
         }
     }
 
-    /// How many faults of `kind` happened since start.
+    /// Whether a fault of `kind` is present now.
+    pub fn has(&self, kind: Fault) -> bool {
+        self.state.lock().expect("health lock").contains_key(&kind)
+    }
+
+    /// How many faults of `kind` began since start.
     pub fn total(&self, kind: Fault) -> u64 {
         let totals = self.totals.lock().expect("health lock");
         totals.get(&kind).copied().unwrap_or(0)
@@ -86,6 +114,15 @@ impl Health {
         match state.values().map(String::as_str).collect::<Vec<_>>() {
             faults if faults.is_empty() => Status::Ok,
             faults => Status::Degraded(faults.join("; ")),
+        }
+    }
+
+    /// `/healthz`'s text: `ok`, `degraded: WHAT` or `down: WHY`.
+    pub fn text(&self) -> String {
+        match self.status() {
+            Status::Ok => "ok".into(),
+            Status::Degraded(what) => format!("degraded: {what}"),
+            Status::Down(why) => format!("down: {why}"),
         }
     }
 
@@ -111,6 +148,12 @@ mod tests {
         assert_eq!(
             health.status(),
             Status::Degraded("move of 'box' refused; cache: disk full".into())
+        );
+        health.fault(Fault::Edit, "move of 'box' refused".into());
+        assert_eq!(
+            health.total(Fault::Edit),
+            1,
+            "the same fault going on is not a new one"
         );
         health.recovered(Fault::Edit);
         assert_eq!(health.status(), Status::Degraded("cache: disk full".into()));

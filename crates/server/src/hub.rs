@@ -29,11 +29,43 @@ pub struct Published {
     pub geometry_version: u64,
 }
 
+impl Published {
+    /// The state `info` and `colours` describe, with its full frame encoded here (the same
+    /// bytes wherever it is encoded: an edge rebuilds what the origin sent) and `delta`, the
+    /// encoded delta from its base version, as it was received or made.
+    pub fn new(
+        info: FrameInfo,
+        colours: Vec<u32>,
+        delta: Option<(u64, Bytes)>,
+        geometry_version: u64,
+    ) -> Published {
+        let full = Bytes::from(
+            ServerMessage::Full(FullFrame {
+                info,
+                colours: colours.clone(),
+            })
+            .encode(),
+        );
+        Published {
+            version: info.solution_version,
+            is_final: info.is_final,
+            checksum: wire::checksum(&colours),
+            colours: Arc::new(colours),
+            scale: info.scale,
+            full,
+            delta,
+            geometry_version,
+        }
+    }
+}
+
 /// The geometry as served, replaced whole when an object moves.
 #[derive(Debug)]
 pub struct GeometryState {
     /// Starts at 1; bumped by every move.
     pub version: u64,
+    /// The scene id the hello carries.
+    pub scene_id: u64,
     /// The encoded hello every viewer gets first.
     pub hello: Bytes,
     /// The encoded geometry served at `/api/scene`.
@@ -43,7 +75,8 @@ pub struct GeometryState {
 }
 
 impl GeometryState {
-    fn new(scene_id: u64, version: u64, geometry: Geometry) -> GeometryState {
+    /// The state served for version `version` of `geometry` of scene `scene_id`.
+    pub fn new(scene_id: u64, version: u64, geometry: Geometry) -> GeometryState {
         let hello = Hello {
             protocol_version: PROTOCOL_VERSION,
             scene_id,
@@ -52,6 +85,7 @@ impl GeometryState {
         };
         GeometryState {
             version,
+            scene_id,
             hello: ServerMessage::Hello(hello).encode().into(),
             encoded: geometry.encode().into(),
             model: Arc::new(geometry),
@@ -154,23 +188,7 @@ impl Hub {
                 };
                 (p.version, Bytes::from(ServerMessage::Delta(frame).encode()))
             });
-        let full = Bytes::from(
-            ServerMessage::Full(FullFrame {
-                info,
-                colours: colours.clone(),
-            })
-            .encode(),
-        );
-        Published {
-            version,
-            is_final,
-            checksum: wire::checksum(&colours),
-            colours: Arc::new(colours),
-            scale,
-            full,
-            delta,
-            geometry_version,
-        }
+        Published::new(info, colours, delta, geometry_version)
     }
 
     /// Publishes a new state (radiosity in W/m^2) unless it encodes to what viewers already
@@ -197,6 +215,26 @@ impl Hub {
         let version = next.version;
         self.sender.send_replace(Arc::new(next));
         version
+    }
+
+    /// A hub that serves what another hub published (an edge's copy of an origin's): the
+    /// geometry and the state as they are, with nothing encoded anew but the hello.
+    pub fn restore(geometry: GeometryState, state: Published) -> Hub {
+        Hub {
+            scene_id: geometry.scene_id,
+            sender: watch::Sender::new(Arc::new(state)),
+            geometry: std::sync::RwLock::new(Arc::new(geometry)),
+        }
+    }
+
+    /// Serves `state` from now on, whatever its version (an edge following an origin).
+    pub fn install(&self, state: Published) {
+        self.sender.send_replace(Arc::new(state));
+    }
+
+    /// Serves `geometry` from now on; frames installed after it should carry its version.
+    pub fn install_geometry(&self, geometry: GeometryState) {
+        *self.geometry.write().expect("geometry lock") = Arc::new(geometry);
     }
 
     /// The newest state.

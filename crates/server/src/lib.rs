@@ -4,7 +4,9 @@
 
 pub mod admission;
 pub mod cache;
+pub mod control;
 pub mod edits;
+pub mod fanout;
 pub mod health;
 pub mod hub;
 pub mod listen;
@@ -62,53 +64,88 @@ impl Default for Limits {
     }
 }
 
-/// What every route and viewer task shares.
-pub struct Shared {
-    /// The published solution.
-    pub hub: Arc<hub::Hub>,
-    /// Counters.
-    pub metrics: metrics::Metrics,
+/// What every scene served by one process shares: the limits, the caps on viewers and
+/// connections, shutdown and the tasks to wait for. An origin serves one scene; an edge
+/// ([`fanout::edge`]) serves every scene published to its NATS.
+pub struct Process {
     /// Viewer limits.
     pub limits: Limits,
     /// Cancelled on shutdown: viewers get a close frame and their tasks end.
     pub shutdown: CancellationToken,
-    /// The last solve's report once the first is done, for `/api/solution`.
-    pub report: std::sync::Mutex<Option<wire::summary::SolveReport>>,
-    /// Edits waiting for the solver thread.
-    pub edits: edits::Edits,
-    /// The bearer token the control API requires.
-    pub token: String,
+    /// Every connection and viewer task, so shutdown can wait for their close frames.
+    pub tasks: tokio_util::task::TaskTracker,
     /// Viewers connected now, under the viewer caps.
     pub viewers: Arc<admission::Gate>,
     /// TCP connections open now (viewers included), under the connection caps.
     pub connections: Arc<admission::Gate>,
-    /// Every connection and viewer task, so shutdown can wait for their close frames.
-    pub tasks: tokio_util::task::TaskTracker,
-    /// Faults the solver thread reported.
-    pub health: health::Health,
-    /// Every object's emission as the published solution has it (W/m^2), in scene order.
-    pub emissions: std::sync::Mutex<Vec<(String, [f64; 3])>>,
 }
 
-impl Shared {
-    /// Shared state over `hub`, with nothing connected, no report yet and no faults.
-    pub fn new(hub: hub::Hub, limits: Limits, token: String) -> Arc<Shared> {
-        Arc::new(Shared {
-            hub: Arc::new(hub),
-            metrics: Default::default(),
+impl Process {
+    /// A process with nothing connected yet.
+    pub fn new(limits: Limits) -> Arc<Process> {
+        Arc::new(Process {
             limits,
             shutdown: Default::default(),
-            report: Default::default(),
-            edits: Default::default(),
-            token,
+            tasks: Default::default(),
             viewers: admission::Gate::new(limits.max_viewers, limits.max_viewers_per_ip),
             connections: admission::Gate::new(
                 limits.max_connections,
                 limits.max_connections_per_ip,
             ),
-            tasks: Default::default(),
+        })
+    }
+}
+
+/// What every route and viewer task of one scene shares.
+pub struct Shared {
+    /// The process this scene is served by.
+    pub process: Arc<Process>,
+    /// The published solution.
+    pub hub: Arc<hub::Hub>,
+    /// Counters.
+    pub metrics: metrics::Metrics,
+    /// The last solve's report once the first is done, for `/api/solution`.
+    pub report: std::sync::Mutex<Option<wire::summary::SolveReport>>,
+    /// Edits waiting for the solver thread.
+    pub edits: edits::Edits,
+    /// The bearer token the control API requires (never empty).
+    pub token: String,
+    /// Faults the solver thread (or, on an edge, the feed) reported.
+    pub health: health::Health,
+    /// Every object's emission as the published solution has it (W/m^2), in scene order.
+    pub emissions: std::sync::Mutex<Vec<(String, [f64; 3])>>,
+    /// On an edge: where control requests go instead of [`Shared::edits`].
+    pub upstream: Option<fanout::Upstream>,
+    /// Cancelled when this scene stops being served (shutdown, or on an edge a restarted
+    /// origin): its viewers get a close frame.
+    pub retired: CancellationToken,
+}
+
+impl Shared {
+    /// Shared state over `hub` in a process of its own, with nothing connected, no report yet
+    /// and no faults.
+    pub fn new(hub: hub::Hub, limits: Limits, token: String) -> Arc<Shared> {
+        Self::in_process(Process::new(limits), hub, token, None)
+    }
+
+    /// Shared state over `hub` for one of the scenes `process` serves.
+    pub fn in_process(
+        process: Arc<Process>,
+        hub: hub::Hub,
+        token: String,
+        upstream: Option<fanout::Upstream>,
+    ) -> Arc<Shared> {
+        Arc::new(Shared {
+            retired: process.shutdown.child_token(),
+            process,
+            hub: Arc::new(hub),
+            metrics: Default::default(),
+            report: Default::default(),
+            edits: Default::default(),
+            token,
             health: Default::default(),
             emissions: Default::default(),
+            upstream,
         })
     }
 }

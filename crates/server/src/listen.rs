@@ -4,8 +4,8 @@
 //! can neither take every file descriptor nor hold memory, and one address cannot take the
 //! server. On shutdown the loop stops accepting and open requests get a short grace.
 
-use crate::Shared;
 use crate::admission::{Pass, Refusal};
+use crate::{Process, Shared};
 use axum::extract::ConnectInfo;
 use hyper_util::rt::{TokioIo, TokioTimer};
 use std::net::SocketAddr;
@@ -94,10 +94,19 @@ pub fn refusal_response(refusal: Refusal, peer: SocketAddr) -> String {
     )
 }
 
-/// Serves the routes on `listener` until `shared.shutdown` is cancelled. Each connection (and
-/// each viewer it becomes) is tracked in `shared.tasks`, so a caller can wait for their ends.
+/// Serves one scene's routes on `listener` until its process shuts down.
 pub async fn serve(listener: TcpListener, shared: Arc<Shared>) -> std::io::Result<()> {
     let router = crate::routes::router(shared.clone());
+    serve_router(listener, router, shared.process.clone()).await
+}
+
+/// Serves `router` on `listener` until `process.shutdown` is cancelled. Each connection (and
+/// each viewer it becomes) is tracked in `process.tasks`, so a caller can wait for their ends.
+pub async fn serve_router(
+    listener: TcpListener,
+    router: axum::Router,
+    process: Arc<Process>,
+) -> std::io::Result<()> {
     loop {
         let (stream, peer) = tokio::select! {
             accepted = listener.accept() => match accepted {
@@ -108,24 +117,24 @@ pub async fn serve(listener: TcpListener, shared: Arc<Shared>) -> std::io::Resul
                     tracing::warn!("accept failed: {error}");
                     tokio::select! {
                         _ = tokio::time::sleep(Duration::from_millis(50)) => continue,
-                        _ = shared.shutdown.cancelled() => return Ok(()),
+                        _ = process.shutdown.cancelled() => return Ok(()),
                     }
                 }
             },
-            _ = shared.shutdown.cancelled() => return Ok(()),
+            _ = process.shutdown.cancelled() => return Ok(()),
         };
-        match shared.connections.admit(peer.ip()) {
+        match process.connections.admit(peer.ip()) {
             Ok(pass) => {
                 let io = TokioIo::new(Counted {
                     stream,
                     _pass: pass,
                 });
-                shared
+                process
                     .tasks
-                    .spawn(connection(io, peer, router.clone(), shared.clone()));
+                    .spawn(connection(io, peer, router.clone(), process.clone()));
             }
             Err(refusal) => {
-                shared.tasks.spawn(async move {
+                process.tasks.spawn(async move {
                     let mut stream = stream;
                     let text = refusal_response(refusal, peer);
                     let _ = tokio::time::timeout(
@@ -144,7 +153,7 @@ async fn connection(
     io: TokioIo<Counted>,
     peer: SocketAddr,
     router: axum::Router,
-    shared: Arc<Shared>,
+    process: Arc<Process>,
 ) {
     let service = hyper::service::service_fn(move |mut request: hyper::Request<_>| {
         // Routes read the peer address for the per-address viewer cap.
@@ -153,13 +162,13 @@ async fn connection(
     });
     let mut http = hyper::server::conn::http1::Builder::new();
     http.timer(TokioTimer::new())
-        .header_read_timeout(shared.limits.header_timeout)
+        .header_read_timeout(process.limits.header_timeout)
         .max_buf_size(MAX_REQUEST_HEAD_BYTES);
     let connection = http.serve_connection(io, service).with_upgrades();
     tokio::pin!(connection);
     tokio::select! {
         _ = connection.as_mut() => {}
-        _ = shared.shutdown.cancelled() => {
+        _ = process.shutdown.cancelled() => {
             connection.as_mut().graceful_shutdown();
             let _ = tokio::time::timeout(SHUTDOWN_GRACE, connection).await;
         }

@@ -3,7 +3,7 @@
 use anyhow::Context;
 use clap::Parser;
 use server::prepared::{prepare, shared_for};
-use server::{Limits, listen, solving};
+use server::{Limits, fanout, listen, solving};
 use solver::args::SolveArgs;
 use std::io::Write;
 use std::path::PathBuf;
@@ -57,6 +57,18 @@ struct Args {
     /// Bearer token for the control API; a random one is made and printed when absent.
     #[arg(long, env = "RADCAST_TOKEN", hide_env_values = true)]
     token: Option<String>,
+    /// NATS server (`nats://host:4222`) to publish every solution version to, for edges
+    /// (`--edge`); with `--edge`, the one to follow.
+    #[arg(long, env = "RADCAST_NATS")]
+    nats: Option<String>,
+    /// Run as an edge: no solver, no scene file; serve every scene origins publish to
+    /// `--nats`, the same bytes as the origin.
+    #[arg(long, requires = "nats")]
+    edge: bool,
+    /// The scene's name on NATS (subjects, `/scenes/NAME/` on edges); default: the scene
+    /// file's stem. On an edge: the scene served at the root (default: the only one).
+    #[arg(long, env = "RADCAST_NAME")]
+    name: Option<String>,
     /// Demo: the scene's lights flicker (emission changes once a second), so viewers see live updates.
     #[arg(long)]
     animate: bool,
@@ -97,6 +109,18 @@ async fn main() -> anyhow::Result<()> {
         idle_timeout: seconds(args.idle_timeout, "idle-timeout")?,
         ..Limits::default()
     };
+    match args.edge {
+        true => run_edge(args, server::Process::new(limits)).await,
+        false => run_origin(args, request, limits).await,
+    }
+}
+
+/// Solves the scene and serves it (and publishes it to NATS with `--nats`).
+async fn run_origin(
+    args: Args,
+    request: solver::SolveRequest,
+    limits: Limits,
+) -> anyhow::Result<()> {
     let prepared = prepare(&args.scene, request)?;
     if !prepared.scene.has_emitter() {
         tracing::warn!(
@@ -146,23 +170,65 @@ async fn main() -> anyhow::Result<()> {
     let cache_dir = (!args.no_cache).then_some(args.cache_dir);
     // A plain thread: the process exits on a signal without waiting for a long solve.
     solving::start(prepared, shared.clone(), cache_dir);
-    let shutdown = shared.shutdown.clone();
+    if let Some(url) = &args.nats {
+        let name = args
+            .name
+            .clone()
+            .unwrap_or_else(|| fanout::scene_name_for(&args.scene));
+        fanout::check_scene_name(&name).map_err(anyhow::Error::msg)?;
+        let nats = fanout::Nats::connect(url, &format!("radcast origin {name}")).await?;
+        let run = random_token()?;
+        tracing::info!("publishing scene '{name}' to NATS at {url}");
+        tokio::spawn(fanout::origin::serve(shared.clone(), nats, name, run));
+    }
+    let router = server::routes::router(shared.clone());
+    let served = serve_until_signal(listener, router, &shared.process).await;
+    shared.edits.close();
+    served
+}
+
+/// Follows every scene published to `--nats` and serves it.
+async fn run_edge(args: Args, process: std::sync::Arc<server::Process>) -> anyhow::Result<()> {
+    let url = args.nats.as_deref().context("--edge needs --nats URL")?;
+    if let Some(name) = &args.name {
+        fanout::check_scene_name(name).map_err(anyhow::Error::msg)?;
+    }
+    let nats = fanout::Nats::connect(url, "radcast edge").await?;
+    let edge = fanout::edge::Edge::new(process.clone(), nats, args.name.clone());
+    let listener = tokio::net::TcpListener::bind(&args.addr)
+        .await
+        .with_context(|| format!("cannot listen on {}", args.addr))?;
+    let address = listener.local_addr()?;
+    let _ = writeln!(
+        std::io::stdout(),
+        "radcast-server: edge of NATS {url} on http://{address}\n  viewers: radcast-client view --url ws://{address}/ws --out view.png\n  scenes:  curl http://{address}/scenes"
+    );
+    tokio::spawn(fanout::edge::follow(edge.clone()));
+    serve_until_signal(listener, fanout::edge::router(edge), &process).await
+}
+
+/// Serves `router` until SIGTERM or SIGINT, then closes every viewer (1001) and waits for
+/// their close frames, at most [`SHUTDOWN_DEADLINE`].
+async fn serve_until_signal(
+    listener: tokio::net::TcpListener,
+    router: axum::Router,
+    process: &std::sync::Arc<server::Process>,
+) -> anyhow::Result<()> {
+    let shutdown = process.shutdown.clone();
     let signals = shutdown_signals()?;
     tokio::spawn(async move {
         let signal = signals.await;
         tracing::info!("{signal}: shutting down, closing viewers");
         shutdown.cancel();
     });
-    listen::serve(listener, shared.clone()).await?;
-    shared.edits.close();
-    // Every viewer gets its close frame (1001) unless it stalls past the grace.
-    shared.tasks.close();
-    if tokio::time::timeout(SHUTDOWN_DEADLINE, shared.tasks.wait())
+    listen::serve_router(listener, router, process.clone()).await?;
+    process.tasks.close();
+    if tokio::time::timeout(SHUTDOWN_DEADLINE, process.tasks.wait())
         .await
         .is_err()
     {
         tracing::warn!(
-            viewers = shared.viewers.open(),
+            viewers = process.viewers.open(),
             "exiting with connections still open"
         );
     }
@@ -215,7 +281,7 @@ async fn animate(shared: std::sync::Arc<server::Shared>, emitters: Vec<(String, 
     for step in 0u64.. {
         tokio::select! {
             _ = tick.tick() => {}
-            _ = shared.shutdown.cancelled() => return,
+            _ = shared.process.shutdown.cancelled() => return,
         }
         let level = 0.7 + 0.3 * (step as f64 * 0.9).sin();
         for (name, emission) in &emitters {

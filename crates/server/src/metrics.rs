@@ -94,31 +94,31 @@ pub fn render(shared: &Shared) -> String {
         "radcast_viewers",
         "gauge",
         "Viewers connected now.",
-        &plain(shared.viewers.open() as u64),
+        &plain(shared.process.viewers.open() as u64),
     );
     metric(
         "radcast_viewers_refused_total",
         "counter",
         "Viewers refused at a viewer cap.",
-        &refusals(&shared.viewers),
+        &refusals(&shared.process.viewers),
     );
     metric(
         "radcast_connections",
         "gauge",
         "TCP connections open now, viewers included.",
-        &plain(shared.connections.open() as u64),
+        &plain(shared.process.connections.open() as u64),
     );
     metric(
         "radcast_connected_addresses",
         "gauge",
         "Distinct peer addresses with a connection open now.",
-        &plain(shared.connections.addresses() as u64),
+        &plain(shared.process.connections.addresses() as u64),
     );
     metric(
         "radcast_connections_refused_total",
         "counter",
         "TCP connections refused at a connection cap before any byte was read.",
-        &refusals(&shared.connections),
+        &refusals(&shared.process.connections),
     );
     let dropped: Vec<_> = DropReason::ALL
         .iter()

@@ -2,6 +2,7 @@
 
 use crate::Shared;
 use crate::admission::Refusal;
+use crate::control::Field;
 use crate::health::Status;
 use crate::viewer::serve_viewer;
 use axum::Router;
@@ -112,12 +113,10 @@ async fn metrics(State(shared): State<Arc<Shared>>) -> Response {
 /// `ok`; `degraded: WHAT` (still 200: viewers are served the last good solution); or
 /// `down: WHY` with 503 once the solver stopped and edits can no longer be applied.
 async fn health(State(shared): State<Arc<Shared>>) -> Response {
+    let text = format!("{}\n", shared.health.text());
     match shared.health.status() {
-        Status::Ok => "ok\n".into_response(),
-        Status::Degraded(what) => format!("degraded: {what}\n").into_response(),
-        Status::Down(why) => {
-            (StatusCode::SERVICE_UNAVAILABLE, format!("down: {why}\n")).into_response()
-        }
+        Status::Down(_) => (StatusCode::SERVICE_UNAVAILABLE, text).into_response(),
+        _ => text.into_response(),
     }
 }
 
@@ -145,7 +144,7 @@ async fn websocket(
         )
             .into_response();
     }
-    let place = match shared.viewers.admit(peer.ip()) {
+    let place = match shared.process.viewers.admit(peer.ip()) {
         Ok(place) => place,
         Err(Refusal::ServerFull) => {
             return (
@@ -162,7 +161,7 @@ async fn websocket(
                 .into_response();
         }
     };
-    let limits = shared.limits;
+    let limits = shared.process.limits;
     // Viewers send only tiny control messages and every frame is flushed as it is sent, so
     // small buffers do: tungstenite's 128 KiB defaults made each idle viewer cost 144 KB.
     upgrade
@@ -172,100 +171,29 @@ async fn websocket(
         .max_frame_size(limits.max_message_bytes)
         .on_upgrade(move |socket| {
             shared
+                .process
                 .tasks
                 .track_future(serve_viewer(socket, shared.clone(), place))
         })
 }
 
-/// Whether `headers` carry `Authorization: Bearer <token>`, compared in constant time.
-pub fn authorized(headers: &HeaderMap, token: &str) -> bool {
-    let Some(given) = headers
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "))
-    else {
-        return false;
-    };
-    given.len() == token.len()
-        && given
-            .bytes()
-            .zip(token.bytes())
-            .fold(0u8, |acc, (a, b)| acc | (a ^ b))
-            == 0
-}
-
-fn refuse(status: StatusCode, reason: String) -> Response {
-    let mut response = (status, axum::Json(serde_json::json!({ "error": reason }))).into_response();
-    if status == StatusCode::UNAUTHORIZED {
-        response.headers_mut().insert(
-            header::WWW_AUTHENTICATE,
-            header::HeaderValue::from_static("Bearer"),
-        );
-    }
-    response
-}
-
-/// Checks an edit: the object exists and the body is `{"FIELD": [a, b, c]}` with values
-/// `check` accepts (the solver's rule for the field). Returns the triple or the reason.
-pub fn parse_edit(
-    objects: &[String],
-    name: &str,
-    body: &[u8],
-    field: &str,
-    check: fn([f64; 3]) -> Result<(), String>,
-) -> Result<[f64; 3], (StatusCode, String)> {
-    if !objects.iter().any(|o| o == name) {
-        return Err((StatusCode::NOT_FOUND, format!("no object named '{name}'")));
-    }
-    let shape = || format!("body must be JSON like {{\"{field}\": [a, b, c]}}");
-    let value: serde_json::Value = serde_json::from_slice(body)
-        .map_err(|e| (StatusCode::BAD_REQUEST, format!("{}: {e}", shape())))?;
-    let object = value
-        .as_object()
-        .filter(|o| o.len() == 1)
-        .ok_or_else(|| (StatusCode::BAD_REQUEST, shape()))?;
-    let triple: [f64; 3] = object
-        .get(field)
-        .and_then(|v| serde_json::from_value(v.clone()).ok())
-        .ok_or_else(|| (StatusCode::BAD_REQUEST, shape()))?;
-    check(triple).map_err(|rule| (StatusCode::BAD_REQUEST, format!("{field} {rule}")))?;
-    Ok(triple)
-}
-
-/// The control API: check the token, parse `{"FIELD": [a, b, c]}`, queue the edit.
-fn edit(
+/// The control API: the origin applies the edit ([`crate::control`]); an edge forwards it to
+/// the origin over NATS and answers with the origin's reply.
+async fn edit(
     shared: &Shared,
     name: &str,
     headers: &HeaderMap,
     body: &[u8],
-    field: &str,
-    check: fn([f64; 3]) -> Result<(), String>,
-    queue: fn(&crate::edits::Edits, &str, [f64; 3]),
+    field: Field,
 ) -> Response {
-    if !authorized(headers, &shared.token) {
-        return refuse(
-            StatusCode::UNAUTHORIZED,
-            "missing or wrong bearer token".into(),
-        );
-    }
-    if let Some(why) = shared.health.stopped() {
-        return refuse(StatusCode::SERVICE_UNAVAILABLE, why);
-    }
-    match parse_edit(
-        &shared.hub.geometry().model.objects,
-        name,
-        body,
-        field,
-        check,
-    ) {
-        Ok(value) => {
-            queue(&shared.edits, name, value);
-            let mut reply = serde_json::json!({ "object": name, "status": "queued" });
-            reply[field] = serde_json::json!(value);
-            (StatusCode::ACCEPTED, axum::Json(reply)).into_response()
-        }
-        Err((status, reason)) => refuse(status, reason),
-    }
+    let authorization = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok());
+    let reply = match &shared.upstream {
+        Some(upstream) => upstream.control(name, field, authorization, body).await,
+        None => crate::control::apply(shared, name, field, authorization, body),
+    };
+    reply.into_response()
 }
 
 async fn set_emission(
@@ -274,15 +202,7 @@ async fn set_emission(
     headers: HeaderMap,
     body: axum::body::Bytes,
 ) -> Response {
-    edit(
-        &shared,
-        &name,
-        &headers,
-        &body,
-        "emission",
-        solver::scene::check_emission,
-        crate::edits::Edits::set_emission,
-    )
+    edit(&shared, &name, &headers, &body, Field::Emission).await
 }
 
 async fn set_transform(
@@ -291,15 +211,7 @@ async fn set_transform(
     headers: HeaderMap,
     body: axum::body::Bytes,
 ) -> Response {
-    edit(
-        &shared,
-        &name,
-        &headers,
-        &body,
-        "translate",
-        solver::scene::check_translation,
-        crate::edits::Edits::translate,
-    )
+    edit(&shared, &name, &headers, &body, Field::Translate).await
 }
 
 #[cfg(test)]

@@ -39,7 +39,7 @@ enum End {
 pub async fn serve_viewer(socket: WebSocket, shared: Arc<Shared>, _place: Pass) {
     let metrics = &shared.metrics;
     let (mut sink, mut stream) = socket.split();
-    let limits = shared.limits;
+    let limits = shared.process.limits;
     let mut updates = shared.hub.subscribe();
     let sent = |bytes: &Bytes| metrics.sent(bytes.len());
 
@@ -114,7 +114,7 @@ pub async fn serve_viewer(socket: WebSocket, shared: Arc<Shared>, _place: Pass) 
                     }
                     Message::Ping(Bytes::new())
                 }
-                _ = shared.shutdown.cancelled() => break 'session End::Shutdown,
+                _ = shared.retired.cancelled() => break 'session End::Shutdown,
             };
             if let Message::Binary(bytes) = &outgoing {
                 sent(bytes);
@@ -144,11 +144,17 @@ pub async fn serve_viewer(socket: WebSocket, shared: Arc<Shared>, _place: Pass) 
             };
             Some(close(code, text))
         }
-        End::Shutdown => Some(close(close_code::AWAY, "server shutting down")),
+        End::Shutdown => Some(close(
+            close_code::AWAY,
+            match shared.process.shutdown.is_cancelled() {
+                true => "server shutting down",
+                false => "the scene's origin restarted: reconnect",
+            },
+        )),
     };
     if let Some(message) = farewell {
         // Best effort: a stalled viewer may not take even this, and shutdown does not wait.
-        let patience = match shared.shutdown.is_cancelled() {
+        let patience = match shared.process.shutdown.is_cancelled() {
             true => limits.send_timeout.min(SHUTDOWN_GRACE),
             false => limits.send_timeout,
         };

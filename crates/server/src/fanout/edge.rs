@@ -1,0 +1,474 @@
+//! An edge: runs no solver and reads no scene file. It follows every scene published to its
+//! NATS (snapshots to start from, frames to stay current) and serves each with the same routes
+//! as an origin, byte for byte: the root serves the default scene, `/scenes/NAME/…` any.
+
+use super::{
+    Nats, RECORD_SUFFIX, SceneRecord, Tag, Upstream, full_object, geometry_object, headers,
+    record_object,
+};
+use crate::hub::{GeometryState, Hub, Published};
+use crate::{Process, Shared};
+use async_nats::jetstream::object_store;
+use axum::Router;
+use axum::extract::{Request, State};
+use axum::http::{StatusCode, Uri};
+use axum::response::{IntoResponse, Response};
+use futures_util::StreamExt;
+use std::collections::BTreeMap;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, RwLock};
+use std::time::Instant;
+use tokio::io::AsyncReadExt;
+use tower::ServiceExt;
+use wire::{Geometry, ServerMessage};
+
+/// One scene as this edge serves it.
+struct Served {
+    shared: Arc<Shared>,
+    router: Router,
+}
+
+/// Every scene this edge follows.
+pub struct Edge {
+    process: Arc<Process>,
+    nats: Nats,
+    scenes: RwLock<BTreeMap<String, Arc<Served>>>,
+    default_scene: Option<String>,
+}
+
+impl Edge {
+    /// An edge on `nats` in `process`; `default_scene` is served at the root (without it, the
+    /// only scene is, when there is one).
+    pub fn new(process: Arc<Process>, nats: Nats, default_scene: Option<String>) -> Arc<Edge> {
+        Arc::new(Edge {
+            process,
+            nats,
+            scenes: Default::default(),
+            default_scene,
+        })
+    }
+
+    /// The names of the scenes served now.
+    pub fn scene_names(&self) -> Vec<String> {
+        self.scenes
+            .read()
+            .expect("scenes lock")
+            .keys()
+            .cloned()
+            .collect()
+    }
+
+    /// The shared state of scene `name`, if it is served.
+    pub fn scene(&self, name: &str) -> Option<Arc<Shared>> {
+        self.served(name).map(|s| s.shared.clone())
+    }
+
+    fn served(&self, name: &str) -> Option<Arc<Served>> {
+        self.scenes.read().expect("scenes lock").get(name).cloned()
+    }
+
+    /// The scene the root serves: the one named at start, or the only one.
+    fn root_scene(&self) -> Result<Arc<Served>, String> {
+        let scenes = self.scenes.read().expect("scenes lock");
+        match (&self.default_scene, scenes.len()) {
+            (Some(name), _) => scenes.get(name).cloned().ok_or_else(|| {
+                format!("down: scene '{name}' has not been published to NATS (yet)")
+            }),
+            (None, 1) => Ok(scenes.values().next().expect("one scene").clone()),
+            (None, 0) => Err("down: no origin has published a scene to NATS (yet)".into()),
+            (None, _) => Err(format!(
+                "down: this edge serves several scenes: use /scenes/NAME/... with NAME one of {}",
+                scenes.keys().cloned().collect::<Vec<_>>().join(", ")
+            )),
+        }
+    }
+}
+
+/// The edge's routes: `/scenes` lists the scene names, `/scenes/NAME/...` serves scene NAME
+/// and every other path the root scene, with an origin's routes.
+pub fn router(edge: Arc<Edge>) -> Router {
+    Router::new()
+        .route("/scenes", axum::routing::get(list))
+        .fallback(dispatch)
+        .with_state(edge)
+}
+
+async fn list(State(edge): State<Arc<Edge>>) -> Response {
+    axum::Json(edge.scene_names()).into_response()
+}
+
+async fn dispatch(State(edge): State<Arc<Edge>>, mut request: Request) -> Response {
+    let path = request.uri().path().to_string();
+    let (served, rest) = match path.strip_prefix("/scenes/") {
+        Some(tail) => {
+            let (name, rest) = tail.split_at(tail.find('/').unwrap_or(tail.len()));
+            match edge.served(name) {
+                Some(served) => (served, rest.to_string()),
+                None => {
+                    return (
+                        StatusCode::NOT_FOUND,
+                        format!("no scene named '{name}' on this edge\n"),
+                    )
+                        .into_response();
+                }
+            }
+        }
+        None => match edge.root_scene() {
+            Ok(served) => (served, path),
+            Err(why) => {
+                return (StatusCode::SERVICE_UNAVAILABLE, format!("{why}\n")).into_response();
+            }
+        },
+    };
+    let rest = if rest.is_empty() {
+        "/".to_string()
+    } else {
+        rest
+    };
+    let uri = match request.uri().query() {
+        Some(query) => format!("{rest}?{query}"),
+        None => rest,
+    };
+    match uri.parse::<Uri>() {
+        Ok(uri) => *request.uri_mut() = uri,
+        Err(_) => return (StatusCode::BAD_REQUEST, "malformed path\n").into_response(),
+    }
+    match served.router.clone().oneshot(request).await {
+        Ok(response) => response,
+        Err(never) => match never {},
+    }
+}
+
+/// A scene's newest state as its origin stored it.
+struct Snapshot {
+    tag: Tag,
+    geometry: GeometryState,
+    state: Published,
+}
+
+async fn read_object(
+    objects: &object_store::ObjectStore,
+    name: &str,
+) -> anyhow::Result<(Tag, Vec<u8>)> {
+    let mut object = objects
+        .get(name)
+        .await
+        .map_err(|e| anyhow::anyhow!("cannot read {name}: {e}"))?;
+    let tag = Tag::from_metadata(&object.info().metadata)
+        .ok_or_else(|| anyhow::anyhow!("{name} carries no radcast tag"))?;
+    let mut bytes = Vec::with_capacity(object.info().size);
+    object.read_to_end(&mut bytes).await?;
+    Ok((tag, bytes))
+}
+
+async fn read_geometry(
+    objects: &object_store::ObjectStore,
+    scene: &str,
+) -> anyhow::Result<(Tag, GeometryState)> {
+    let (tag, bytes) = read_object(objects, &geometry_object(scene)).await?;
+    let geometry = Geometry::decode(&bytes)?;
+    Ok((
+        tag.clone(),
+        GeometryState::new(tag.scene_id, tag.version, geometry),
+    ))
+}
+
+async fn read_snapshot(
+    objects: &object_store::ObjectStore,
+    scene: &str,
+) -> anyhow::Result<Snapshot> {
+    let (geometry_tag, geometry) = read_geometry(objects, scene).await?;
+    let (tag, bytes) = read_object(objects, &full_object(scene)).await?;
+    if tag.run != geometry_tag.run || tag.geometry_version != geometry_tag.version {
+        anyhow::bail!("the snapshot of '{scene}' is being replaced");
+    }
+    let ServerMessage::Full(frame) = ServerMessage::decode(&bytes)? else {
+        anyhow::bail!("{} is not a full frame", full_object(scene));
+    };
+    let state = Published::new(frame.info, frame.colours, None, tag.geometry_version);
+    Ok(Snapshot {
+        tag,
+        geometry,
+        state,
+    })
+}
+
+/// Follows NATS until shutdown: scene records (new scenes, summaries, health), frames,
+/// heartbeats; reads snapshots where frames cannot be applied and after every reconnect.
+pub async fn follow(edge: Arc<Edge>) {
+    let subscribe = |subject: &'static str| edge.nats.client.subscribe(subject);
+    let (mut frames, mut alive) =
+        match tokio::try_join!(subscribe("radcast.*.frame"), subscribe("radcast.*.alive")) {
+            Ok(subscriptions) => subscriptions,
+            Err(error) => {
+                tracing::error!("cannot subscribe on NATS: {error}");
+                return;
+            }
+        };
+    let mut connects = edge.nats.connects.clone();
+    let mut tick = tokio::time::interval(super::ALIVE_INTERVAL);
+    loop {
+        let objects = match edge.nats.snapshots().await {
+            Ok(objects) => Some(objects),
+            Err(error) => {
+                tracing::warn!("edge: {error:#}");
+                None
+            }
+        };
+        let watch = match &objects {
+            Some(objects) => objects.watch_with_history().await.ok(),
+            None => None,
+        };
+        let (Some(objects), Some(mut watch)) = (objects, watch) else {
+            tokio::select! {
+                _ = tick.tick() => { edge.check_silence(); continue }
+                _ = edge.process.shutdown.cancelled() => return,
+            }
+        };
+        loop {
+            tokio::select! {
+                change = watch.next() => match change {
+                    Some(Ok(info)) => {
+                        if let Some(scene) = info.name.strip_suffix(RECORD_SUFFIX).filter(|_| !info.deleted) {
+                            edge.take_record(&objects, scene).await;
+                        }
+                    }
+                    // The watch ends with its connection: make it again.
+                    _ => break,
+                },
+                Some(message) = frames.next() => edge.take_frame(&objects, message).await,
+                Some(message) = alive.next() => edge.heard(&message),
+                _ = tick.tick() => {
+                    edge.check_silence();
+                    edge.resync_stale(&objects).await;
+                }
+                _ = connects.changed() => {
+                    // Frames sent while disconnected are lost: read every snapshot again.
+                    for name in edge.scene_names() {
+                        if let Some(shared) = edge.scene(&name) {
+                            upstream(&shared).stale.store(true, Ordering::Relaxed);
+                        }
+                    }
+                    break;
+                }
+                _ = edge.process.shutdown.cancelled() => return,
+            }
+        }
+    }
+}
+
+fn upstream(shared: &Shared) -> &Upstream {
+    shared
+        .upstream
+        .as_ref()
+        .expect("an edge's scenes have an upstream")
+}
+
+/// The scene a subject `radcast.SCENE.KIND` is about.
+fn scene_of(subject: &str) -> Option<&str> {
+    subject.strip_prefix("radcast.")?.split('.').next()
+}
+
+fn header(message: &async_nats::Message, name: &str) -> Option<String> {
+    Some(message.headers.as_ref()?.get(name)?.as_str().to_string())
+}
+
+impl Edge {
+    /// A scene record: a new scene (or a restarted origin) is read from its snapshot; a known
+    /// one takes the report, emissions and origin health.
+    async fn take_record(&self, objects: &object_store::ObjectStore, scene: &str) {
+        let record: SceneRecord = match read_object(objects, &record_object(scene))
+            .await
+            .and_then(|(_, bytes)| Ok(serde_json::from_slice(&bytes)?))
+        {
+            Ok(record) => record,
+            Err(error) => {
+                tracing::warn!("edge: the record of '{scene}' is unreadable: {error:#}");
+                return;
+            }
+        };
+        let shared = match self.scene(scene) {
+            Some(shared) if upstream(&shared).run == record.run => shared,
+            _ => match self.start_serving(objects, scene).await {
+                Some(shared) => shared,
+                None => return,
+            },
+        };
+        *shared.report.lock().expect("report lock") = record.report;
+        *shared.emissions.lock().expect("emissions lock") = record.emissions;
+        match record.health.as_str() {
+            "ok" => shared.health.recovered(crate::health::Fault::Origin),
+            other => shared.health.fault(
+                crate::health::Fault::Origin,
+                format!("the origin of '{scene}' reports {other}"),
+            ),
+        }
+    }
+
+    /// Serves `scene` from its snapshot, replacing (and closing the viewers of) an earlier
+    /// run's copy.
+    async fn start_serving(
+        &self,
+        objects: &object_store::ObjectStore,
+        scene: &str,
+    ) -> Option<Arc<Shared>> {
+        let snapshot = match read_snapshot(objects, scene).await {
+            Ok(snapshot) => snapshot,
+            Err(error) => {
+                tracing::warn!("edge: cannot serve '{scene}' yet: {error:#}");
+                return None;
+            }
+        };
+        let upstream = Upstream {
+            nats: self.nats.clone(),
+            scene: scene.to_string(),
+            run: snapshot.tag.run.clone(),
+            last_heard: Instant::now().into(),
+            stale: false.into(),
+        };
+        let hub = Hub::restore(snapshot.geometry, snapshot.state);
+        let shared = Shared::in_process(self.process.clone(), hub, String::new(), Some(upstream));
+        let served = Arc::new(Served {
+            router: crate::routes::router(shared.clone()),
+            shared: shared.clone(),
+        });
+        let previous = self
+            .scenes
+            .write()
+            .expect("scenes lock")
+            .insert(scene.to_string(), served);
+        match previous {
+            Some(previous) => {
+                tracing::info!("edge: the origin of '{scene}' restarted; its viewers reconnect");
+                previous.shared.retired.cancel();
+            }
+            None => tracing::info!("edge: serving scene '{scene}'"),
+        }
+        Some(shared)
+    }
+
+    /// A frame: applied when it follows what this edge holds, else the snapshot is read.
+    async fn take_frame(&self, objects: &object_store::ObjectStore, message: async_nats::Message) {
+        let Some(shared) = scene_of(&message.subject).and_then(|s| self.scene(s)) else {
+            return;
+        };
+        let link = upstream(&shared);
+        *link.last_heard.lock().expect("heard lock") = Instant::now();
+        let version = header(&message, headers::VERSION).and_then(|v| v.parse::<u64>().ok());
+        let geometry_version =
+            header(&message, headers::GEOMETRY).and_then(|v| v.parse::<u64>().ok());
+        let (Some(version), Some(geometry_version)) = (version, geometry_version) else {
+            return;
+        };
+        if header(&message, headers::RUN).as_deref() != Some(link.run.as_str()) {
+            // A restarted origin: its record brings the new run.
+            return;
+        }
+        let held = shared.hub.current();
+        if version <= held.version {
+            return;
+        }
+        if geometry_version != shared.hub.geometry().version {
+            match read_geometry(objects, &link.scene).await {
+                Ok((tag, geometry)) if tag.version == geometry_version && tag.run == link.run => {
+                    shared.hub.install_geometry(geometry)
+                }
+                _ => {
+                    link.stale.store(true, Ordering::Relaxed);
+                    return;
+                }
+            }
+        }
+        let next = match ServerMessage::decode(&message.payload) {
+            Ok(ServerMessage::Full(frame)) => Some(Published::new(
+                frame.info,
+                frame.colours,
+                None,
+                geometry_version,
+            )),
+            Ok(ServerMessage::Delta(delta))
+                if delta.base_version == held.version
+                    && delta.info.vertex_count as usize == held.colours.len() =>
+            {
+                // Decoding checked every index against the vertex count.
+                let mut colours = held.colours.to_vec();
+                for (&index, &colour) in delta.indices.iter().zip(&delta.colours) {
+                    colours[index as usize] = colour;
+                }
+                Some(Published::new(
+                    delta.info,
+                    colours,
+                    Some((delta.base_version, message.payload.clone())),
+                    geometry_version,
+                ))
+            }
+            // Too big for a message, or a gap: the snapshot has it.
+            _ => None,
+        };
+        match next {
+            Some(state) if state.version == version => shared.hub.install(state),
+            _ => link.stale.store(true, Ordering::Relaxed),
+        }
+    }
+
+    fn heard(&self, message: &async_nats::Message) {
+        if let Some(shared) = scene_of(&message.subject).and_then(|s| self.scene(s)) {
+            *upstream(&shared).last_heard.lock().expect("heard lock") = Instant::now();
+        }
+    }
+
+    /// Reports origins not heard for [`super::SILENT_AFTER`] and a NATS connection that is down.
+    fn check_silence(&self) {
+        let connected = self.nats.is_connected();
+        for name in self.scene_names() {
+            let Some(shared) = self.scene(&name) else {
+                continue;
+            };
+            let version = shared.hub.current().version;
+            match connected {
+                true => shared.health.recovered(crate::health::Fault::Nats),
+                false => shared.health.fault(
+                    crate::health::Fault::Nats,
+                    format!("NATS is unreachable: serving the last solution of '{name}' (version {version})"),
+                ),
+            }
+            match upstream(&shared).silent_for() > super::SILENT_AFTER {
+                true => shared.health.fault(
+                    crate::health::Fault::OriginSilent,
+                    format!("the origin of '{name}' is silent: serving its last solution (version {version})"),
+                ),
+                false => shared.health.recovered(crate::health::Fault::OriginSilent),
+            }
+        }
+    }
+
+    /// Reads the snapshot of every scene a frame could not be applied to.
+    async fn resync_stale(&self, objects: &object_store::ObjectStore) {
+        for name in self.scene_names() {
+            let Some(shared) = self.scene(&name) else {
+                continue;
+            };
+            let link = upstream(&shared);
+            if !link.stale.swap(false, Ordering::Relaxed) {
+                continue;
+            }
+            match read_snapshot(objects, &name).await {
+                Ok(snapshot) if snapshot.tag.run != link.run => {
+                    self.start_serving(objects, &name).await;
+                }
+                Ok(snapshot) => {
+                    if snapshot.geometry.version != shared.hub.geometry().version {
+                        shared.hub.install_geometry(snapshot.geometry);
+                    }
+                    if snapshot.state.version != shared.hub.current().version {
+                        shared.hub.install(snapshot.state);
+                    }
+                }
+                Err(error) => {
+                    tracing::warn!("edge: cannot read the snapshot of '{name}': {error:#}");
+                    link.stale.store(true, Ordering::Relaxed);
+                }
+            }
+        }
+    }
+}
