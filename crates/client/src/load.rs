@@ -280,6 +280,26 @@ pub fn parse_metrics(text: &str) -> Vec<(String, f64)> {
         .collect()
 }
 
+/// Every server's `/metrics` (one that does not answer gives none); with several servers each
+/// name is prefixed by the server's base URL, `http://host:port radcast_viewers`.
+pub fn servers_metrics(bases: &[String]) -> Vec<(String, f64)> {
+    bases
+        .iter()
+        .flat_map(|base| {
+            let metrics = crate::fetch_metrics(base)
+                .map(|text| parse_metrics(&text))
+                .unwrap_or_default();
+            let prefix = match bases.len() {
+                1 => String::new(),
+                _ => format!("{base} "),
+            };
+            metrics
+                .into_iter()
+                .map(move |(name, value)| (format!("{prefix}{name}"), value))
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -3,7 +3,7 @@
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
 use client::render::{View, render};
-use client::session::{ViewerOutcome, next_binary, request_full, watch_until_final};
+use client::session::{ViewerOutcome, next_binary, request_full, watch_until_final_on_any};
 use client::viewer::{Step, Viewer};
 use client::{fetch_geometry, fetch_solution, http_base};
 use std::path::{Path, PathBuf};
@@ -35,9 +35,15 @@ struct Cli {
 enum Command {
     /// Connect, wait for the final solution and render PNGs.
     View {
-        /// The server's stream, e.g. ws://127.0.0.1:8080/ws.
-        #[arg(long, default_value = "ws://127.0.0.1:8080/ws")]
-        url: String,
+        /// The server's stream, e.g. ws://127.0.0.1:8080/ws; repeat (or separate with commas)
+        /// for several servers showing the same scene (an origin and its edges): viewers
+        /// are spread over them, and one that loses its server goes on with the next.
+        #[arg(
+            long = "url",
+            default_value = "ws://127.0.0.1:8080/ws",
+            value_delimiter = ','
+        )]
+        urls: Vec<String>,
         /// Output PNG; with several viewers or cameras, `-v{viewer}` and `-c{camera}` are added.
         #[arg(long, default_value = "view.png")]
         out: PathBuf,
@@ -59,9 +65,14 @@ enum Command {
     },
     /// Stay connected and print every update (version, vertices changed, bytes, latency).
     Watch {
-        /// The server's stream.
-        #[arg(long, default_value = "ws://127.0.0.1:8080/ws")]
-        url: String,
+        /// The server's stream; with several (repeated or comma-separated), a lost connection
+        /// goes on with the next, as a viewer of an edge that stopped would.
+        #[arg(
+            long = "url",
+            default_value = "ws://127.0.0.1:8080/ws",
+            value_delimiter = ','
+        )]
+        urls: Vec<String>,
         /// Render a PNG of every final update into this folder.
         #[arg(long)]
         out_dir: Option<PathBuf>,
@@ -72,9 +83,14 @@ enum Command {
     /// Load test: open many viewers in this process, each decoding every frame, and report
     /// connection times, frame latency percentiles, traffic and the server's own figures.
     Load {
-        /// The server's stream.
-        #[arg(long, default_value = "ws://127.0.0.1:8080/ws")]
-        url: String,
+        /// The server's stream; with several (repeated or comma-separated), viewers are spread
+        /// over them in turn (an origin and its edges).
+        #[arg(
+            long = "url",
+            default_value = "ws://127.0.0.1:8080/ws",
+            value_delimiter = ','
+        )]
+        urls: Vec<String>,
         /// Viewers to open.
         #[arg(long, default_value_t = 100)]
         clients: usize,
@@ -122,21 +138,21 @@ fn output_path(
 async fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::View {
-            url,
+            urls,
             out,
             cameras,
             width,
             height,
             clients,
             timeout,
-        } => view(url, out, cameras, width, height, clients, timeout).await,
+        } => view(urls, out, cameras, width, height, clients, timeout).await,
         Command::Watch {
-            url,
+            urls,
             out_dir,
             updates,
-        } => watch(&url, out_dir, updates).await,
+        } => watch(&urls, out_dir, updates).await,
         Command::Load {
-            url,
+            urls,
             clients,
             ramp,
             duration,
@@ -146,15 +162,16 @@ async fn main() -> anyhow::Result<()> {
             token,
         } => {
             let edits = match edit {
+                // Edits go to the first server; an edge passes them to its origin.
                 Some(object) => Some(Editor::new(
-                    &url,
+                    &urls[0],
                     object,
                     &edit_emission,
                     token.unwrap_or_default(),
                 )?),
                 None => None,
             };
-            load(url, clients, ramp, duration, json, edits).await
+            load(urls, clients, ramp, duration, json, edits).await
         }
     }
 }
@@ -204,7 +221,7 @@ impl Editor {
 }
 
 async fn load(
-    url: String,
+    urls: Vec<String>,
     clients: usize,
     ramp: f64,
     duration: f64,
@@ -218,7 +235,10 @@ async fn load(
         positive_seconds(ramp, "ramp")?,
         positive_seconds(duration, "duration")?,
     );
-    let base = http_base(&url)?;
+    let bases = urls
+        .iter()
+        .map(|url| http_base(url))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let limit = client::raise_file_limit();
     if (limit as usize) < clients + 64 {
         eprintln!("warning: the open-file limit is {limit}; {clients} viewers may fail to connect");
@@ -231,7 +251,7 @@ async fn load(
     let viewers: Vec<_> = (0..clients)
         .map(|k| {
             tokio::spawn(client::load::run_viewer(
-                url.clone(),
+                urls[k % urls.len()].clone(),
                 ramp.mul_f64(k as f64 / clients as f64),
                 deadline,
             ))
@@ -260,10 +280,8 @@ async fn load(
         Some(task) => task.await??,
         None => Vec::new(),
     };
-    let metrics = tokio::task::spawn_blocking(move || client::fetch_metrics(&base))
-        .await?
-        .map(|t| client::load::parse_metrics(&t))
-        .unwrap_or_default();
+    let metrics =
+        tokio::task::spawn_blocking(move || client::load::servers_metrics(&bases)).await?;
     let cpu = cpu_at_start
         .zip(client::load::process_cpu_seconds())
         .map(|(a, b)| 100.0 * (b - a) / started.elapsed().as_secs_f64());
@@ -318,7 +336,7 @@ async fn load(
         for (name, value) in report
             .server
             .iter()
-            .filter(|(n, _)| !n.starts_with("radcast_solve"))
+            .filter(|(n, _)| !n.contains("radcast_solve"))
         {
             say!("server    {name} {value}");
         }
@@ -326,8 +344,12 @@ async fn load(
     Ok(())
 }
 
-async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> anyhow::Result<()> {
-    let fetch = || {
+async fn watch(
+    urls: &[String],
+    out_dir: Option<PathBuf>,
+    updates: Option<u64>,
+) -> anyhow::Result<()> {
+    let fetch = |url: &str| {
         let base = http_base(url);
         tokio::task::spawn_blocking(move || fetch_geometry(&base?))
     };
@@ -335,75 +357,100 @@ async fn watch(url: &str, out_dir: Option<PathBuf>, updates: Option<u64>) -> any
         Some(dir) => {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("{}: cannot create", dir.display()))?;
-            Some(fetch().await??)
+            Some(fetch(&urls[0]).await??)
         }
         None => None,
     };
-    let (mut socket, _) = tokio_tungstenite::connect_async(url)
-        .await
-        .with_context(|| format!("connecting to {url}"))?;
-    let mut viewer = Viewer::default();
     let mut seen = 0u64;
-    while let Some(data) = next_binary(&mut socket).await {
-        let data = data?;
-        let (full, changed, info) = match viewer.receive(&data)? {
-            Step::Hello(hello) => {
-                say!(
-                    "hello: scene {:016x}, {} vertices, protocol {}",
-                    hello.scene_id,
-                    hello.vertex_count,
-                    hello.protocol_version
-                );
-                continue;
-            }
-            Step::GeometryChanged { geometry_version } => {
-                say!("geometry changed: version {geometry_version}");
-                if geometry.is_some() {
-                    geometry = Some(fetch().await??);
+    let mut failed_in_a_row = 0;
+    for url in urls.iter().cycle() {
+        let ended = match tokio_tungstenite::connect_async(url.as_str()).await {
+            Ok((mut socket, _)) => {
+                failed_in_a_row = 0;
+                let mut viewer = Viewer::default();
+                loop {
+                    let data = match next_binary(&mut socket).await {
+                        Some(Ok(data)) => data,
+                        Some(Err(error)) => break Err(error),
+                        None => break Ok(()),
+                    };
+                    let (full, changed, info) = match viewer.receive(&data)? {
+                        Step::Hello(hello) => {
+                            say!(
+                                "hello: scene {:016x}, {} vertices, protocol {}, from {url}",
+                                hello.scene_id,
+                                hello.vertex_count,
+                                hello.protocol_version
+                            );
+                            continue;
+                        }
+                        Step::GeometryChanged { geometry_version } => {
+                            say!("geometry changed: version {geometry_version}");
+                            if geometry.is_some() {
+                                geometry = Some(fetch(url).await??);
+                            }
+                            continue;
+                        }
+                        Step::NeedsFull => {
+                            request_full(&mut socket).await?;
+                            continue;
+                        }
+                        Step::Applied {
+                            full,
+                            changed,
+                            info,
+                        } => (full, changed, info),
+                    };
+                    let latency_ms =
+                        wire::unix_micros_now().saturating_sub(info.sent_at_unix_micros) as f64
+                            / 1e3;
+                    say!(
+                        "version {}: {}, {changed} vertices changed, {} bytes, latency {latency_ms:.1} ms{}",
+                        info.solution_version,
+                        if full { "full" } else { "delta" },
+                        data.len(),
+                        if info.is_final { ", final" } else { "" }
+                    );
+                    if let (Some(dir), Some(geometry), true) = (&out_dir, &geometry, info.is_final)
+                    {
+                        let path = dir.join(format!("version-{:06}.png", info.solution_version));
+                        render(
+                            geometry,
+                            viewer.buffer(),
+                            &View::for_scene(geometry),
+                            512,
+                            512,
+                        )
+                        .write_png(&path)?;
+                    }
+                    seen += 1;
+                    if updates.is_some_and(|n| seen >= n) {
+                        socket.close(None).await?;
+                        return Ok(());
+                    }
                 }
-                continue;
             }
-            Step::NeedsFull => {
-                request_full(&mut socket).await?;
-                continue;
+            Err(error) => {
+                failed_in_a_row += 1;
+                Err(anyhow::Error::new(error).context(format!("connecting to {url}")))
             }
-            Step::Applied {
-                full,
-                changed,
-                info,
-            } => (full, changed, info),
         };
-        let latency_ms =
-            wire::unix_micros_now().saturating_sub(info.sent_at_unix_micros) as f64 / 1e3;
-        say!(
-            "version {}: {}, {changed} vertices changed, {} bytes, latency {latency_ms:.1} ms{}",
-            info.solution_version,
-            if full { "full" } else { "delta" },
-            data.len(),
-            if info.is_final { ", final" } else { "" }
-        );
-        if let (Some(dir), Some(geometry), true) = (&out_dir, &geometry, info.is_final) {
-            let path = dir.join(format!("version-{:06}.png", info.solution_version));
-            render(
-                geometry,
-                viewer.buffer(),
-                &View::for_scene(geometry),
-                512,
-                512,
-            )
-            .write_png(&path)?;
+        // One server: its end is the end. Several: go on with the next, until every one
+        // refused in a row.
+        if urls.len() == 1 || failed_in_a_row == urls.len() {
+            return ended;
         }
-        seen += 1;
-        if updates.is_some_and(|n| seen >= n) {
-            socket.close(None).await?;
-            break;
-        }
+        let why = match &ended {
+            Ok(()) => "connection ended".to_string(),
+            Err(error) => format!("{error:#}"),
+        };
+        say!("{url}: {why}; going on with the next server");
     }
-    Ok(())
+    unreachable!("urls is never empty: clap gives a default")
 }
 
 async fn view(
-    url: String,
+    urls: Vec<String>,
     out: PathBuf,
     cameras: Vec<View>,
     width: u32,
@@ -416,17 +463,15 @@ async fn view(
     }
     let limit = Duration::try_from_secs_f64(timeout)
         .context("--timeout must be a positive number of seconds")?;
-    let base = http_base(&url)?;
+    let base = http_base(&urls[0])?;
     let geometry = {
         let base = base.clone();
         tokio::task::spawn_blocking(move || fetch_geometry(&base)).await??
     };
     let viewers: Vec<_> = (0..clients)
-        .map(|_| {
-            tokio::spawn({
-                let url = url.clone();
-                async move { watch_until_final(&url, limit).await }
-            })
+        .map(|k| {
+            let urls = urls.clone();
+            tokio::spawn(async move { watch_until_final_on_any(&urls, k, limit).await })
         })
         .collect();
     let mut outcomes: Vec<ViewerOutcome> = Vec::with_capacity(clients);

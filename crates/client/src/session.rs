@@ -33,6 +33,24 @@ pub async fn watch_until_final(url: &str, limit: Duration) -> anyhow::Result<Vie
         .with_context(|| format!("{url}: no final frame within {limit:?}"))?
 }
 
+/// Like [`watch_until_final`] on `urls[first % n]`; a server that fails is left for the next
+/// in turn, until each failed once.
+pub async fn watch_until_final_on_any(
+    urls: &[String],
+    first: usize,
+    limit: Duration,
+) -> anyhow::Result<ViewerOutcome> {
+    let mut failures = Vec::new();
+    for k in 0..urls.len() {
+        let url = &urls[(first + k) % urls.len()];
+        match watch_until_final(url, limit).await {
+            Ok(outcome) => return Ok(outcome),
+            Err(error) => failures.push(format!("{error:#}")),
+        }
+    }
+    bail!("every server failed: {}", failures.join("; "))
+}
+
 /// The next binary message on `socket`: `None` when the connection ends; an error when it
 /// fails or the server closes it.
 pub async fn next_binary(socket: &mut Socket) -> Option<anyhow::Result<Bytes>> {

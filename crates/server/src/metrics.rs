@@ -204,7 +204,7 @@ pub fn render(shared: &Shared) -> String {
     metric(
         "radcast_faults_total",
         "counter",
-        "Faults the solver thread reported, by kind (see /healthz for the newest).",
+        "Faults that began, by kind (see /healthz for those present now).",
         &faults,
     );
     metric(
@@ -220,5 +220,26 @@ pub fn render(shared: &Shared) -> String {
         "1 while the solver thread applies edits.",
         &plain(up as u64),
     );
+    if let Some(upstream) = &shared.upstream {
+        let silent = upstream.silent_for();
+        metric(
+            "radcast_edge_origin_up",
+            "gauge",
+            "On an edge: 1 while the origin is heard on NATS, 0 once it is silent.",
+            &plain((silent <= crate::fanout::SILENT_AFTER) as u64),
+        );
+        metric(
+            "radcast_edge_origin_silent_seconds",
+            "gauge",
+            "On an edge: seconds since the origin was last heard.",
+            &[(String::new(), silent.as_secs_f64())],
+        );
+        metric(
+            "radcast_edge_nats_connected",
+            "gauge",
+            "On an edge: 1 while connected to NATS.",
+            &plain(upstream.nats.is_connected() as u64),
+        );
+    }
     out
 }

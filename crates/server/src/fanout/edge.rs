@@ -15,10 +15,11 @@ use axum::http::{StatusCode, Uri};
 use axum::response::{IntoResponse, Response};
 use futures_util::StreamExt;
 use std::collections::BTreeMap;
+use std::sync::Arc;
 use std::sync::atomic::Ordering;
-use std::sync::{Arc, RwLock};
 use std::time::Instant;
 use tokio::io::AsyncReadExt;
+use tokio::sync::watch;
 use tower::ServiceExt;
 use wire::{Geometry, ServerMessage};
 
@@ -32,7 +33,7 @@ struct Served {
 pub struct Edge {
     process: Arc<Process>,
     nats: Nats,
-    scenes: RwLock<BTreeMap<String, Arc<Served>>>,
+    scenes: watch::Sender<BTreeMap<String, Arc<Served>>>,
     default_scene: Option<String>,
 }
 
@@ -50,12 +51,7 @@ impl Edge {
 
     /// The names of the scenes served now.
     pub fn scene_names(&self) -> Vec<String> {
-        self.scenes
-            .read()
-            .expect("scenes lock")
-            .keys()
-            .cloned()
-            .collect()
+        self.scenes.borrow().keys().cloned().collect()
     }
 
     /// The shared state of scene `name`, if it is served.
@@ -63,13 +59,27 @@ impl Edge {
         self.served(name).map(|s| s.shared.clone())
     }
 
+    /// Waits until scene `name` is served as published by the origin run `run`, and returns it.
+    pub async fn serving(&self, name: &str, run: &str) -> Arc<Shared> {
+        let mut scenes = self.scenes.subscribe();
+        let served = scenes
+            .wait_for(|scenes| {
+                scenes
+                    .get(name)
+                    .is_some_and(|s| upstream(&s.shared).run == run)
+            })
+            .await
+            .expect("the edge lives as long as its sender");
+        served[name].shared.clone()
+    }
+
     fn served(&self, name: &str) -> Option<Arc<Served>> {
-        self.scenes.read().expect("scenes lock").get(name).cloned()
+        self.scenes.borrow().get(name).cloned()
     }
 
     /// The scene the root serves: the one named at start, or the only one.
     fn root_scene(&self) -> Result<Arc<Served>, String> {
-        let scenes = self.scenes.read().expect("scenes lock");
+        let scenes = self.scenes.borrow();
         match (&self.default_scene, scenes.len()) {
             (Some(name), _) => scenes.get(name).cloned().ok_or_else(|| {
                 format!("down: scene '{name}' has not been published to NATS (yet)")
@@ -196,15 +206,16 @@ async fn read_snapshot(
 /// Follows NATS until shutdown: scene records (new scenes, summaries, health), frames,
 /// heartbeats; reads snapshots where frames cannot be applied and after every reconnect.
 pub async fn follow(edge: Arc<Edge>) {
-    let subscribe = |subject: &'static str| edge.nats.client.subscribe(subject);
-    let (mut frames, mut alive) =
-        match tokio::try_join!(subscribe("radcast.*.frame"), subscribe("radcast.*.alive")) {
-            Ok(subscriptions) => subscriptions,
-            Err(error) => {
-                tracing::error!("cannot subscribe on NATS: {error}");
-                return;
-            }
-        };
+    // One subscription for frames, records and heartbeats: NATS keeps one publisher's
+    // messages in order on it, so a record is taken before the frame it goes with.
+    let mut messages = match edge.nats.client.subscribe("radcast.*.*").await {
+        Ok(messages) => messages,
+        Err(error) => {
+            tracing::error!("cannot subscribe on NATS: {error}");
+            return;
+        }
+    };
+    tokio::spawn(watch_health(edge.clone()));
     let mut connects = edge.nats.connects.clone();
     let mut tick = tokio::time::interval(super::ALIVE_INTERVAL);
     loop {
@@ -221,7 +232,7 @@ pub async fn follow(edge: Arc<Edge>) {
         };
         let (Some(objects), Some(mut watch)) = (objects, watch) else {
             tokio::select! {
-                _ = tick.tick() => { edge.check_silence(); continue }
+                _ = tick.tick() => continue,
                 _ = edge.process.shutdown.cancelled() => return,
             }
         };
@@ -230,18 +241,19 @@ pub async fn follow(edge: Arc<Edge>) {
                 change = watch.next() => match change {
                     Some(Ok(info)) => {
                         if let Some(scene) = info.name.strip_suffix(RECORD_SUFFIX).filter(|_| !info.deleted) {
-                            edge.take_record(&objects, scene).await;
+                            edge.take_stored_record(&objects, scene).await;
                         }
                     }
                     // The watch ends with its connection: make it again.
                     _ => break,
                 },
-                Some(message) = frames.next() => edge.take_frame(&objects, message).await,
-                Some(message) = alive.next() => edge.heard(&message),
-                _ = tick.tick() => {
-                    edge.check_silence();
-                    edge.resync_stale(&objects).await;
-                }
+                Some(message) = messages.next() => match message.subject.rsplit('.').next() {
+                    Some("frame") => edge.take_frame(&objects, message).await,
+                    Some("record") => edge.take_record_message(&message),
+                    Some("alive") => edge.heard(&message),
+                    _ => {}
+                },
+                _ = tick.tick() => edge.resync_stale(&objects).await,
                 _ = connects.changed() => {
                     // Frames sent while disconnected are lost: read every snapshot again.
                     for name in edge.scene_names() {
@@ -254,6 +266,31 @@ pub async fn follow(edge: Arc<Edge>) {
                 _ = edge.process.shutdown.cancelled() => return,
             }
         }
+    }
+}
+
+/// Once a second, whatever the feed is doing: reports silent origins and a lost NATS.
+async fn watch_health(edge: Arc<Edge>) {
+    let mut tick = tokio::time::interval(super::ALIVE_INTERVAL);
+    loop {
+        tokio::select! {
+            _ = tick.tick() => edge.check_silence(),
+            _ = edge.process.shutdown.cancelled() => return,
+        }
+    }
+}
+
+/// The report, emissions and origin health of `record`, for `/api/solution`, `/api/objects`
+/// and `/healthz`.
+fn take_record(shared: &Shared, scene: &str, record: SceneRecord) {
+    *shared.report.lock().expect("report lock") = record.report;
+    *shared.emissions.lock().expect("emissions lock") = record.emissions;
+    match record.health.as_str() {
+        "ok" => shared.health.recovered(crate::health::Fault::Origin),
+        other => shared.health.fault(
+            crate::health::Fault::Origin,
+            format!("the origin of '{scene}' reports {other}"),
+        ),
     }
 }
 
@@ -274,9 +311,9 @@ fn header(message: &async_nats::Message, name: &str) -> Option<String> {
 }
 
 impl Edge {
-    /// A scene record: a new scene (or a restarted origin) is read from its snapshot; a known
-    /// one takes the report, emissions and origin health.
-    async fn take_record(&self, objects: &object_store::ObjectStore, scene: &str) {
+    /// A stored scene record: a new scene (or a restarted origin) is read from its
+    /// snapshot; a known one takes the record.
+    async fn take_stored_record(&self, objects: &object_store::ObjectStore, scene: &str) {
         let record: SceneRecord = match read_object(objects, &record_object(scene))
             .await
             .and_then(|(_, bytes)| Ok(serde_json::from_slice(&bytes)?))
@@ -294,14 +331,22 @@ impl Edge {
                 None => return,
             },
         };
-        *shared.report.lock().expect("report lock") = record.report;
-        *shared.emissions.lock().expect("emissions lock") = record.emissions;
-        match record.health.as_str() {
-            "ok" => shared.health.recovered(crate::health::Fault::Origin),
-            other => shared.health.fault(
-                crate::health::Fault::Origin,
-                format!("the origin of '{scene}' reports {other}"),
-            ),
+        take_record(&shared, scene, record);
+    }
+
+    /// A record sent ahead of a frame, for a scene served now.
+    fn take_record_message(&self, message: &async_nats::Message) {
+        let Some((scene, shared)) =
+            scene_of(&message.subject).and_then(|s| Some((s, self.scene(s)?)))
+        else {
+            return;
+        };
+        match serde_json::from_slice::<SceneRecord>(&message.payload) {
+            Ok(record) if record.run == upstream(&shared).run => {
+                take_record(&shared, scene, record)
+            }
+            Ok(_) => {}
+            Err(error) => tracing::warn!("edge: a record of '{scene}' is unreadable: {error}"),
         }
     }
 
@@ -332,11 +377,9 @@ impl Edge {
             router: crate::routes::router(shared.clone()),
             shared: shared.clone(),
         });
-        let previous = self
-            .scenes
-            .write()
-            .expect("scenes lock")
-            .insert(scene.to_string(), served);
+        let mut previous = None;
+        self.scenes
+            .send_modify(|scenes| previous = scenes.insert(scene.to_string(), served));
         match previous {
             Some(previous) => {
                 tracing::info!("edge: the origin of '{scene}' restarted; its viewers reconnect");

@@ -11,6 +11,8 @@
 //!   `S.record`, the [`SceneRecord`] (report, emissions, health), by which edges discover
 //!   scenes (they watch the bucket). One object store, not a key-value bucket too: async-nats
 //!   0.51 cannot create a bucket on nats-server 2.9 (it misreads the account info).
+//! - `radcast.S.record` (core NATS): the record again, sent before the frame it goes with,
+//!   so an edge that shows a final frame already has its report (as the origin does).
 //! - `radcast.S.alive` (core NATS): the origin's heartbeat, every [`ALIVE_INTERVAL`].
 //! - `radcast.S.control` (request/reply): control-API requests an edge forwards; the origin
 //!   checks the token and answers as it would over HTTP.
@@ -60,6 +62,11 @@ pub mod headers {
 /// The subject a scene's frames are published on.
 pub fn frame_subject(scene: &str) -> String {
     format!("radcast.{scene}.frame")
+}
+
+/// The subject a scene's record is published on when it changes.
+pub fn record_subject(scene: &str) -> String {
+    format!("radcast.{scene}.record")
 }
 
 /// The subject a scene's origin says it is alive on.

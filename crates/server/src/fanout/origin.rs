@@ -4,7 +4,7 @@
 
 use super::{
     Nats, SceneRecord, Tag, alive_subject, control_subject, frame_subject, full_object,
-    geometry_object, headers, record_object,
+    geometry_object, headers, record_object, record_subject,
 };
 use crate::Shared;
 use crate::control::{Field, Reply};
@@ -62,7 +62,7 @@ async fn publish(shared: &Shared, nats: &Nats, scene: &str, run: &str) {
 }
 
 /// Sends what NATS lacks of the hub's newest state: the geometry and full frame snapshots,
-/// then the frame (the delta when NATS holds its base), then the record when it changed.
+/// the record when it changed, then the frame (the delta when NATS holds its base).
 async fn publish_newest(
     shared: &Shared,
     nats: &Nats,
@@ -97,14 +97,26 @@ async fn publish_newest(
         )
         .await?;
     }
-    if held.map(|(v, _)| v) != Some(current.version) {
-        put(
-            objects,
-            &full_object(scene),
-            tag(current.version),
-            &current.full,
-        )
-        .await?;
+    let new_version = held.map(|(v, _)| v) != Some(current.version);
+    if new_version {
+        let tag = tag(current.version);
+        put(objects, &full_object(scene), tag, &current.full).await?;
+    }
+    let record = SceneRecord {
+        run: run.to_string(),
+        report: shared.report.lock().expect("report lock").clone(),
+        emissions: shared.emissions.lock().expect("emissions lock").clone(),
+        health: shared.health.text(),
+    };
+    if sent.as_ref().map(|s| &s.record) != Some(&record) {
+        let json = serde_json::to_vec(&record)?;
+        put(objects, &record_object(scene), tag(current.version), &json).await?;
+        // Before the frame, on the same connection: edges get the two in this order.
+        nats.client
+            .publish(record_subject(scene), json.into())
+            .await?;
+    }
+    if new_version {
         let mut payload = match &current.delta {
             Some((base, delta)) if held.map(|(v, _)| v) == Some(*base) => delta.clone(),
             _ => current.full.clone(),
@@ -120,22 +132,6 @@ async fn publish_newest(
         nats.client
             .publish_with_headers(frame_subject(scene), frame_headers, payload)
             .await?;
-    }
-    let record = SceneRecord {
-        run: run.to_string(),
-        report: shared.report.lock().expect("report lock").clone(),
-        emissions: shared.emissions.lock().expect("emissions lock").clone(),
-        health: shared.health.text(),
-    };
-    if sent.as_ref().map(|s| &s.record) != Some(&record) {
-        let tag = tag(current.version);
-        put(
-            objects,
-            &record_object(scene),
-            tag,
-            &serde_json::to_vec(&record)?,
-        )
-        .await?;
     }
     *sent = Some(Sent {
         version: current.version,

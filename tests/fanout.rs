@@ -1,0 +1,528 @@
+//! Origins and edges through a real NATS: the one at 127.0.0.1:4222 (`.ci/run` starts it when
+//! it is not running), and for restarts a `nats-server` of the test's own on a free port.
+//! Origins and edges run in this process; "killing" one shuts it down: its listener, viewers,
+//! heartbeat and publishing stop, as they do when the process dies.
+
+use futures_util::StreamExt;
+use server::fanout::{self, Nats, edge::Edge};
+use server::prepared::{prepare, shared_for};
+use server::{Limits, Process, Shared, solving};
+use solver::{PatchTarget, SolveRequest};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio_tungstenite::tungstenite::Message;
+use wire::{ColourBuffer, ServerMessage};
+
+const TOKEN: &str = "fan-out-token";
+/// Generous bound on waits that take milliseconds to seconds; a hang fails instead of blocking.
+const PATIENCE: Duration = Duration::from_secs(90);
+const SHARED_NATS: &str = "nats://127.0.0.1:4222";
+
+/// Connects to NATS at `url`, failing with what to do when nothing answers.
+async fn connect(url: &str, name: &str) -> Nats {
+    let nats = Nats::connect(url, name).await.expect("the client starts");
+    tokio::time::timeout(Duration::from_secs(10), nats.client.flush())
+        .await
+        .unwrap_or_else(|_| panic!("no NATS at {url}: `.ci/run` starts one (scripts/nats.sh)"))
+        .expect("NATS answers");
+    nats
+}
+
+/// An origin serving the Cornell box as scene `name` and publishing it to NATS.
+struct Origin {
+    address: SocketAddr,
+    shared: Arc<Shared>,
+    run: String,
+}
+
+impl Drop for Origin {
+    fn drop(&mut self) {
+        // Ends the solver thread's edit loop and everything the process runs.
+        self.shared.edits.close();
+        self.shared.process.shutdown.cancel();
+    }
+}
+
+async fn origin(url: &str, name: &str) -> Origin {
+    let request = SolveRequest {
+        patches: PatchTarget::Count(300),
+        ..SolveRequest::default()
+    };
+    let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).expect("scene loads");
+    let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let address = listener.local_addr().unwrap();
+    tokio::spawn(server::listen::serve(listener, shared.clone()));
+    solving::start(prepared, shared.clone(), None);
+    let run = format!("run-{name}-{}", wire::unix_micros_now());
+    let nats = connect(url, "test origin").await;
+    tokio::spawn(fanout::origin::serve(
+        shared.clone(),
+        nats,
+        name.into(),
+        run.clone(),
+    ));
+    Origin {
+        address,
+        shared,
+        run,
+    }
+}
+
+/// An edge following NATS at `url`, serving `name` at its root.
+struct EdgeServer {
+    address: SocketAddr,
+    edge: Arc<Edge>,
+    process: Arc<Process>,
+}
+
+impl Drop for EdgeServer {
+    fn drop(&mut self) {
+        self.process.shutdown.cancel();
+    }
+}
+
+async fn edge(url: &str, name: &str) -> EdgeServer {
+    let process = Process::new(Limits::default());
+    let edge = Edge::new(
+        process.clone(),
+        connect(url, "test edge").await,
+        Some(name.into()),
+    );
+    tokio::spawn(fanout::edge::follow(edge.clone()));
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let address = listener.local_addr().unwrap();
+    tokio::spawn(server::listen::serve_router(
+        listener,
+        fanout::edge::router(edge.clone()),
+        process.clone(),
+    ));
+    EdgeServer {
+        address,
+        edge,
+        process,
+    }
+}
+
+/// Waits until `shared` holds a final state with `checksum` (and at least `version`).
+async fn final_state(shared: &Shared, version: u64, checksum: u32) {
+    let mut updates = shared.hub.subscribe();
+    tokio::time::timeout(
+        PATIENCE,
+        updates.wait_for(|p| p.is_final && p.version >= version && p.checksum == checksum),
+    )
+    .await
+    .expect("the state arrives")
+    .expect("the hub lives");
+}
+
+/// Waits until the origin's solve is final and returns its version and checksum.
+async fn origin_final(origin: &Origin) -> (u64, u32) {
+    let mut updates = origin.shared.hub.subscribe();
+    let state = tokio::time::timeout(PATIENCE, updates.wait_for(|p| p.is_final))
+        .await
+        .expect("the solve ends")
+        .expect("the hub lives")
+        .clone();
+    (state.version, state.checksum)
+}
+
+/// GET `path`: status and body bytes.
+async fn get(address: SocketAddr, path: &str) -> (u16, Vec<u8>) {
+    let url = format!("http://{address}{path}");
+    tokio::task::spawn_blocking(move || {
+        let agent: ureq::Agent = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .build()
+            .into();
+        let mut response = agent.get(&url).call().unwrap();
+        let status = response.status().as_u16();
+        (status, response.body_mut().read_to_vec().unwrap())
+    })
+    .await
+    .unwrap()
+}
+
+async fn get_text(address: SocketAddr, path: &str) -> (u16, String) {
+    let (status, body) = get(address, path).await;
+    (status, String::from_utf8(body).unwrap())
+}
+
+/// PUT with an optional bearer token; returns the status and the body.
+async fn put(address: SocketAddr, path: &str, token: Option<&str>, body: &str) -> (u16, String) {
+    let (url, body, token) = (
+        format!("http://{address}{path}"),
+        body.to_string(),
+        token.map(str::to_string),
+    );
+    tokio::task::spawn_blocking(move || {
+        let agent: ureq::Agent = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .build()
+            .into();
+        let mut request = agent.put(&url);
+        if let Some(token) = token {
+            request = request.header("Authorization", &format!("Bearer {token}"));
+        }
+        let mut response = request.send(body.as_bytes()).unwrap();
+        (
+            response.status().as_u16(),
+            response.body_mut().read_to_string().unwrap(),
+        )
+    })
+    .await
+    .unwrap()
+}
+
+/// Polls `/healthz` until its text starts with `prefix` (the edge checks once a second).
+async fn health_becomes(address: SocketAddr, prefix: &str) -> String {
+    tokio::time::timeout(PATIENCE, async {
+        loop {
+            let (_, text) = get_text(address, "/healthz").await;
+            if text.starts_with(prefix) {
+                return text;
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await; // polling interval, not synchronisation
+        }
+    })
+    .await
+    .unwrap_or_else(|_| panic!("/healthz never said '{prefix}…'"))
+}
+
+/// The first two messages a new viewer gets (hello and full frame), as bytes.
+async fn first_messages(address: SocketAddr) -> Vec<Vec<u8>> {
+    let (mut socket, _) = tokio_tungstenite::connect_async(format!("ws://{address}/ws"))
+        .await
+        .unwrap();
+    let mut messages = Vec::new();
+    while messages.len() < 2 {
+        if let Some(Ok(Message::Binary(bytes))) = socket.next().await {
+            messages.push(bytes.to_vec());
+        }
+    }
+    messages
+}
+
+/// A viewer that applies every frame; `ends_with` reads until it holds `checksum`, final.
+struct Viewer {
+    socket: tokio_tungstenite::WebSocketStream<
+        tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
+    >,
+    buffer: ColourBuffer,
+}
+
+impl Viewer {
+    async fn connect(address: SocketAddr) -> Viewer {
+        let (socket, _) = tokio_tungstenite::connect_async(format!("ws://{address}/ws"))
+            .await
+            .unwrap();
+        Viewer {
+            socket,
+            buffer: ColourBuffer::default(),
+        }
+    }
+
+    async fn ends_with(&mut self, checksum: u32) {
+        tokio::time::timeout(PATIENCE, async {
+            while !(self.buffer.info.is_some_and(|i| i.is_final)
+                && wire::checksum(&self.buffer.colours) == checksum)
+            {
+                match self.socket.next().await {
+                    Some(Ok(Message::Binary(bytes))) => {
+                        let message = ServerMessage::decode(&bytes).unwrap();
+                        self.buffer
+                            .apply(&message)
+                            .expect("deltas apply to what the viewer holds");
+                    }
+                    Some(Ok(_)) => {}
+                    other => panic!("the viewer's connection ended: {other:?}"),
+                }
+            }
+        })
+        .await
+        .expect("the viewer ends on the expected state");
+    }
+}
+
+/// Everything a viewer or a client can ask of a server, which must be equal on origin and edge.
+async fn served_bytes(address: SocketAddr) -> Vec<Vec<u8>> {
+    let mut all = Vec::new();
+    for path in [
+        "/api/solution",
+        "/api/scene",
+        "/api/objects",
+        "/api/scene.glb",
+    ] {
+        let (status, body) = get(address, path).await;
+        assert_eq!(status, 200, "{path}");
+        all.push(body);
+    }
+    all.extend(first_messages(address).await);
+    all
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_start() {
+    let name = "test-same-bytes";
+    let edge_a = edge(SHARED_NATS, name).await;
+    let origin = origin(SHARED_NATS, name).await;
+    let (version, checksum) = origin_final(&origin).await;
+    let on_a = edge_a.edge.serving(name, &origin.run).await;
+    final_state(&on_a, version, checksum).await;
+    assert_eq!(
+        served_bytes(edge_a.address).await,
+        served_bytes(origin.address).await
+    );
+    let mut viewer = Viewer::connect(edge_a.address).await;
+    viewer.ends_with(checksum).await;
+    let before = checksum;
+
+    // An edit sent to the edge reaches the origin, which answers as it would itself.
+    let path = "/api/objects/light/emission";
+    let refused = put(
+        edge_a.address,
+        path,
+        Some("wrong"),
+        r#"{"emission": [1, 2, 3]}"#,
+    )
+    .await;
+    assert_eq!(
+        refused,
+        put(
+            origin.address,
+            path,
+            Some("wrong"),
+            r#"{"emission": [1, 2, 3]}"#
+        )
+        .await
+    );
+    assert_eq!(refused.0, 401, "{}", refused.1);
+    let mut finished = origin.shared.edits.finished();
+    let done = *finished.borrow_and_update() + 2;
+    let queued = put(
+        edge_a.address,
+        path,
+        Some(TOKEN),
+        r#"{"emission": [30, 20, 10]}"#,
+    )
+    .await;
+    assert_eq!(queued.0, 202, "{}", queued.1);
+    // A move, sent to the origin: new geometry travels too.
+    let moved = put(
+        origin.address,
+        "/api/objects/tall_block/transform",
+        Some(TOKEN),
+        r#"{"translate": [20, 0, -15]}"#,
+    )
+    .await;
+    assert_eq!(moved.0, 202, "{}", moved.1);
+    tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= done))
+        .await
+        .expect("both edits are applied")
+        .unwrap();
+    let (version, checksum) = origin_final(&origin).await;
+    assert_ne!(checksum, before, "the edits changed the solution");
+    final_state(&on_a, version, checksum).await;
+    viewer.ends_with(checksum).await;
+    assert_eq!(
+        on_a.hub.geometry().version,
+        2,
+        "the move's geometry reached the edge"
+    );
+    assert_eq!(
+        served_bytes(edge_a.address).await,
+        served_bytes(origin.address).await
+    );
+
+    // An edge started now is served from the snapshots at once, without the origin's help.
+    let edge_b = edge(SHARED_NATS, name).await;
+    let on_b = edge_b.edge.serving(name, &origin.run).await;
+    assert_eq!(
+        (on_b.hub.current().version, on_b.hub.current().checksum),
+        (version, checksum)
+    );
+    assert_eq!(
+        served_bytes(edge_b.address).await,
+        served_bytes(origin.address).await
+    );
+    let (status, scenes) = get_text(edge_b.address, "/scenes").await;
+    assert_eq!(status, 200);
+    assert!(scenes.contains(&format!("\"{name}\"")), "{scenes}");
+    // The same scene under its name, as an edge serving several would.
+    let (status, solution) = get(edge_b.address, &format!("/scenes/{name}/api/solution")).await;
+    assert_eq!(
+        (status, solution),
+        get(origin.address, "/api/solution").await
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn edges_keep_serving_a_dead_origin_and_viewers_move_on_from_a_dead_edge() {
+    let name = "test-dead-origin";
+    let origin = origin(SHARED_NATS, name).await;
+    let (edge_a, edge_b) = (edge(SHARED_NATS, name).await, edge(SHARED_NATS, name).await);
+    let (version, checksum) = origin_final(&origin).await;
+    for edge in [&edge_a, &edge_b] {
+        let on_edge = edge.edge.serving(name, &origin.run).await;
+        final_state(&on_edge, version, checksum).await;
+    }
+    let (_, solution) = get(edge_a.address, "/api/solution").await;
+    assert_eq!(
+        get_text(edge_a.address, "/healthz").await,
+        (200, "ok\n".into())
+    );
+
+    drop(origin);
+    let health = health_becomes(edge_a.address, "degraded: ").await;
+    assert!(
+        health.contains(&format!("the origin of '{name}' is silent")),
+        "{health}"
+    );
+    assert!(health.contains(&format!("(version {version})")), "{health}");
+    let (_, metrics) = get_text(edge_a.address, "/metrics").await;
+    assert!(metrics.contains("radcast_edge_origin_up 0"), "{metrics}");
+    assert!(
+        metrics.contains("radcast_faults_total{kind=\"origin_silent\"} 1"),
+        "{metrics}"
+    );
+    // Still serving the last solution, to viewers old and new.
+    assert_eq!(get(edge_a.address, "/api/solution").await, (200, solution));
+    Viewer::connect(edge_a.address)
+        .await
+        .ends_with(checksum)
+        .await;
+    // Control has nowhere to go: refused with a pointer to the origin.
+    let (status, reply) = put(
+        edge_a.address,
+        "/api/objects/light/emission",
+        Some(TOKEN),
+        r#"{"emission": [1, 1, 1]}"#,
+    )
+    .await;
+    assert_eq!(status, 503, "{reply}");
+    assert!(
+        reply.contains("send control requests to the origin"),
+        "{reply}"
+    );
+
+    // Edge A goes away; a client given both edges goes on with B.
+    let urls = [edge_a.address, edge_b.address].map(|a| format!("ws://{a}/ws"));
+    drop(edge_a);
+    let outcome = client::session::watch_until_final_on_any(&urls, 0, PATIENCE)
+        .await
+        .expect("edge B serves");
+    assert_eq!(wire::checksum(&outcome.buffer.colours), checksum);
+}
+
+/// A `nats-server` of this test's own (JetStream on, stored in a temporary folder), so it can
+/// be stopped and started again on the same port with the same store.
+struct NatsProcess {
+    port: u16,
+    store: tempfile::TempDir,
+    child: Option<std::process::Child>,
+}
+
+const NATS_SERVER: &str = "nats-server";
+
+impl NatsProcess {
+    fn start() -> Option<NatsProcess> {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let mut nats = NatsProcess {
+            port,
+            store: tempfile::tempdir().unwrap(),
+            child: None,
+        };
+        nats.restart().then_some(nats)
+    }
+
+    fn url(&self) -> String {
+        format!("nats://127.0.0.1:{}", self.port)
+    }
+
+    /// Starts the server (again); false when there is no `nats-server` to start.
+    fn restart(&mut self) -> bool {
+        let spawned = std::process::Command::new(NATS_SERVER)
+            .args([
+                "-a",
+                "127.0.0.1",
+                "-p",
+                &self.port.to_string(),
+                "-js",
+                "-sd",
+            ])
+            .arg(self.store.path())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn();
+        match spawned {
+            Ok(child) => {
+                self.child = Some(child);
+                true
+            }
+            Err(error) => {
+                eprintln!(
+                    "skipped: cannot start `{NATS_SERVER}` ({error}); Debian: apt-get install nats-server (.ci/run installs it)"
+                );
+                false
+            }
+        }
+    }
+
+    fn stop(&mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+impl Drop for NatsProcess {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn after_nats_restarts_edges_resync_and_viewers_end_on_the_final_state() {
+    let Some(mut nats) = NatsProcess::start() else {
+        return;
+    };
+    let name = "test-restart";
+    let origin = origin(&nats.url(), name).await;
+    let edge = edge(&nats.url(), name).await;
+    let (version, checksum) = origin_final(&origin).await;
+    let on_edge = edge.edge.serving(name, &origin.run).await;
+    final_state(&on_edge, version, checksum).await;
+    let mut viewer = Viewer::connect(edge.address).await;
+    viewer.ends_with(checksum).await;
+
+    nats.stop();
+    let health = health_becomes(edge.address, "degraded: ").await;
+    assert!(health.contains("NATS is unreachable"), "{health}");
+    // An edit while NATS is down: the origin applies it; edges cannot hear of it yet.
+    let mut finished = origin.shared.edits.finished();
+    let done = *finished.borrow_and_update() + 1;
+    let queued = put(
+        origin.address,
+        "/api/objects/light/emission",
+        Some(TOKEN),
+        r#"{"emission": [40, 40, 40]}"#,
+    )
+    .await;
+    assert_eq!(queued.0, 202, "{}", queued.1);
+    tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= done))
+        .await
+        .expect("the edit is applied")
+        .unwrap();
+    let (version, checksum) = origin_final(&origin).await;
+
+    assert!(nats.restart());
+    final_state(&on_edge, version, checksum).await;
+    viewer.ends_with(checksum).await;
+    health_becomes(edge.address, "ok").await;
+}
