@@ -438,5 +438,5 @@ async fn the_page_follows_edits_moves_and_a_server_restart() {
         restarted.hub.current().checksum.to_string()
     );
     restarted.edits.close();
-    restarted.shutdown.cancel();
+    restarted.process.shutdown.cancel();
 }

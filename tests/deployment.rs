@@ -20,21 +20,60 @@ fn command(service: &Yaml) -> Vec<String> {
         .collect()
 }
 
+/// The value after `flag` in `words`.
+fn after<'a>(words: &'a [String], flag: &str) -> &'a str {
+    &words[words
+        .iter()
+        .position(|w| w == flag)
+        .unwrap_or_else(|| panic!("{flag}"))
+        + 1]
+}
+
 #[test]
-fn compose_names_the_server_viewers_and_load_tester() {
+fn compose_names_nats_the_origin_two_edges_viewers_and_load_tester() {
     let doc = compose();
     let services = doc["services"].as_hash().expect("services");
     let names: Vec<&str> = services.keys().filter_map(Yaml::as_str).collect();
-    assert_eq!(names, ["server", "viewers", "load"]);
+    assert_eq!(
+        names,
+        ["nats", "server", "edge-a", "edge-b", "viewers", "load"]
+    );
+    let nats_url = "nats://nats:4222";
     let server = &doc["services"]["server"];
     assert_eq!(
         server["build"].as_str(),
         Some("."),
         "the server builds from the top-level Dockerfile"
     );
+    assert_eq!(
+        after(&command(server), "--nats"),
+        nats_url,
+        "the origin publishes to NATS"
+    );
+    let nats = command(&doc["services"]["nats"]);
+    assert!(
+        nats.contains(&"-js".to_string()),
+        "NATS runs JetStream: {nats:?}"
+    );
     let image = server["image"]
         .as_str()
         .expect("the server names its image");
+    for edge in ["edge-a", "edge-b"] {
+        let service = &doc["services"][edge];
+        let words = command(service);
+        assert!(words.contains(&"--edge".to_string()), "{edge}: {words:?}");
+        assert_eq!(
+            after(&words, "--nats"),
+            nats_url,
+            "{edge} follows the same NATS"
+        );
+        assert_eq!(service["image"].as_str(), Some(image));
+        assert_eq!(
+            service["depends_on"]["server"]["condition"].as_str(),
+            Some("service_healthy"),
+            "{edge} starts once the origin answers"
+        );
+    }
     for name in ["viewers", "load"] {
         let service = &doc["services"][name];
         assert_eq!(
@@ -42,17 +81,21 @@ fn compose_names_the_server_viewers_and_load_tester() {
             Some(image),
             "{name} runs the image the server builds"
         );
-        assert_eq!(
-            service["depends_on"]["server"]["condition"].as_str(),
-            Some("service_healthy"),
-            "{name} waits for the server"
-        );
-        // Viewers reach the server by its service name on the port the image listens on.
+        for edge in ["edge-a", "edge-b"] {
+            assert_eq!(
+                service["depends_on"][edge]["condition"].as_str(),
+                Some("service_healthy"),
+                "{name} waits for {edge}"
+            );
+        }
+        // Viewers reach the edges by their service names on the port the image listens on.
         let words = command(service);
-        let url = &words[words.iter().position(|w| w == "--url").expect("--url") + 1];
-        assert_eq!(url, "ws://server:8080/ws");
+        assert_eq!(
+            after(&words, "--url"),
+            "ws://edge-a:8080/ws,ws://edge-b:8080/ws"
+        );
     }
-    for volume in ["cache", "renders"] {
+    for volume in ["cache", "renders", "nats"] {
         assert!(
             !doc["volumes"][volume].is_badvalue(),
             "volume {volume} is declared"
@@ -78,6 +121,9 @@ fn every_command_runs_a_binary_the_dockerfile_installs() {
     assert_eq!(installed, ["radcast-server", "radcast-client", "radcast"]);
     let doc = compose();
     for (name, service) in doc["services"].as_hash().expect("services") {
+        if name.as_str() == Some("nats") {
+            continue; // NATS's own image
+        }
         let words = command(service);
         assert!(
             installed.contains(&words[0].as_str()),

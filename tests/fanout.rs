@@ -1,5 +1,6 @@
-//! Origins and edges through a real NATS: the one at 127.0.0.1:4222 (`.ci/run` starts it when
-//! it is not running), and for restarts a `nats-server` of the test's own on a free port.
+//! Origins and edges through a real NATS: the one at 127.0.0.1:4222 (`scripts/nats.sh`, run by
+//! `.ci/run`, starts it), or where none answers there a `nats-server` of the test's own on a
+//! free port, as for the restart test. Without either, the tests say so and skip.
 //! Origins and edges run in this process; "killing" one shuts it down: its listener, viewers,
 //! heartbeat and publishing stop, as they do when the process dies.
 
@@ -18,6 +19,16 @@ const TOKEN: &str = "fan-out-token";
 /// Generous bound on waits that take milliseconds to seconds; a hang fails instead of blocking.
 const PATIENCE: Duration = Duration::from_secs(90);
 const SHARED_NATS: &str = "nats://127.0.0.1:4222";
+
+/// The shared NATS when it answers, else one of this test's own (kept alive by the second
+/// value); `None` when there is neither.
+fn test_nats() -> Option<(String, Option<NatsProcess>)> {
+    let shared = "127.0.0.1:4222".parse().unwrap();
+    match std::net::TcpStream::connect_timeout(&shared, Duration::from_secs(1)) {
+        Ok(_) => Some((SHARED_NATS.to_string(), None)),
+        Err(_) => NatsProcess::start().map(|own| (own.url(), Some(own))),
+    }
+}
 
 /// Connects to NATS at `url`, failing with what to do when nothing answers.
 async fn connect(url: &str, name: &str) -> Nats {
@@ -264,9 +275,12 @@ async fn served_bytes(address: SocketAddr) -> Vec<Vec<u8>> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_start() {
+    let Some((nats, _own)) = test_nats() else {
+        return;
+    };
     let name = "test-same-bytes";
-    let edge_a = edge(SHARED_NATS, name).await;
-    let origin = origin(SHARED_NATS, name).await;
+    let edge_a = edge(&nats, name).await;
+    let origin = origin(&nats, name).await;
     let (version, checksum) = origin_final(&origin).await;
     let on_a = edge_a.edge.serving(name, &origin.run).await;
     final_state(&on_a, version, checksum).await;
@@ -336,7 +350,7 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
     );
 
     // An edge started now is served from the snapshots at once, without the origin's help.
-    let edge_b = edge(SHARED_NATS, name).await;
+    let edge_b = edge(&nats, name).await;
     let on_b = edge_b.edge.serving(name, &origin.run).await;
     assert_eq!(
         (on_b.hub.current().version, on_b.hub.current().checksum),
@@ -355,13 +369,20 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
         (status, solution),
         get(origin.address, "/api/solution").await
     );
+    // The browser page too, its links relative (`/scenes/NAME` redirects to `/scenes/NAME/`).
+    let page = get(edge_b.address, &format!("/scenes/{name}")).await;
+    assert_eq!(page, get(origin.address, "/").await);
+    assert!(String::from_utf8_lossy(&page.1).contains("src=\"viewer.js\""));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn edges_keep_serving_a_dead_origin_and_viewers_move_on_from_a_dead_edge() {
+    let Some((nats, _own)) = test_nats() else {
+        return;
+    };
     let name = "test-dead-origin";
-    let origin = origin(SHARED_NATS, name).await;
-    let (edge_a, edge_b) = (edge(SHARED_NATS, name).await, edge(SHARED_NATS, name).await);
+    let origin = origin(&nats, name).await;
+    let (edge_a, edge_b) = (edge(&nats, name).await, edge(&nats, name).await);
     let (version, checksum) = origin_final(&origin).await;
     for edge in [&edge_a, &edge_b] {
         let on_edge = edge.edge.serving(name, &origin.run).await;

@@ -24,7 +24,7 @@ function join(hex, intensity) {
 }
 
 async function put(name, what, value) {
-  const response = await fetch(`/api/objects/${encodeURIComponent(name)}/${what === "emission" ? "emission" : "transform"}`, {
+  const response = await fetch(`api/objects/${encodeURIComponent(name)}/${what === "emission" ? "emission" : "transform"}`, {
     method: "PUT",
     headers: { "Content-Type": "application/json", Authorization: `Bearer ${token.value}` },
     body: JSON.stringify({ [what]: value }),
@@ -35,7 +35,7 @@ async function put(name, what, value) {
 
 /** Fills the table: a colour and intensity for emitters, move buttons for every object. */
 export async function showControls(sceneRadius) {
-  const objects = await (await fetch("/api/objects")).json();
+  const objects = await (await fetch("api/objects")).json();
   const step = Math.max(sceneRadius * 0.05, 1e-30);
   table.replaceChildren();
   for (const { name, emission } of objects) {

@@ -208,7 +208,7 @@ function showStatus() {
 async function fetchGeometry(version) {
   // A move may land between the notice and the fetch: fetch until the versions agree.
   for (;;) {
-    const response = await fetch("/api/scene");
+    const response = await fetch("api/scene");
     const geometry = decodeGeometry(new Uint8Array(await response.arrayBuffer()));
     const fetched = BigInt(response.headers.get("x-radcast-geometry-version") || "0");
     if (version === null || fetched >= version) return [geometry, fetched];
@@ -216,13 +216,14 @@ async function fetchGeometry(version) {
 }
 
 async function checkWithServer() {
-  const summary = await (await fetch("/api/solution")).json();
+  const summary = await (await fetch("api/solution")).json();
   state.serverChecksum = state.buffer.info && BigInt(summary.solution_version) === state.buffer.info.solutionVersion ? summary.checksum : null;
   showStatus();
 }
 
 function connect() {
-  const socket = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`);
+  // Relative to the page, so an edge serves it under /scenes/NAME/ too.
+  const socket = new WebSocket(new URL("ws", location.href.replace(/^http/, "ws")));
   socket.binaryType = "arraybuffer";
   let queue = Promise.resolve();
   socket.onopen = () => { state.connected = true; showStatus(); };

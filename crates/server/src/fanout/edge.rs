@@ -35,6 +35,8 @@ pub struct Edge {
     nats: Nats,
     scenes: watch::Sender<BTreeMap<String, Arc<Served>>>,
     default_scene: Option<String>,
+    /// Scenes whose record was seen but whose snapshot could not be read yet.
+    pending: std::sync::Mutex<std::collections::BTreeSet<String>>,
 }
 
 impl Edge {
@@ -46,6 +48,7 @@ impl Edge {
             nats,
             scenes: Default::default(),
             default_scene,
+            pending: Default::default(),
         })
     }
 
@@ -111,7 +114,16 @@ async fn dispatch(State(edge): State<Arc<Edge>>, mut request: Request) -> Respon
     let path = request.uri().path().to_string();
     let (served, rest) = match path.strip_prefix("/scenes/") {
         Some(tail) => {
-            let (name, rest) = tail.split_at(tail.find('/').unwrap_or(tail.len()));
+            let Some((name, rest)) = tail.find('/').map(|slash| tail.split_at(slash)) else {
+                // The page's links are relative: it must be served under a trailing slash.
+                let query = request
+                    .uri()
+                    .query()
+                    .map(|q| format!("?{q}"))
+                    .unwrap_or_default();
+                return axum::response::Redirect::permanent(&format!("/scenes/{tail}/{query}"))
+                    .into_response();
+            };
             match edge.served(name) {
                 Some(served) => (served, rest.to_string()),
                 None => {
@@ -130,15 +142,12 @@ async fn dispatch(State(edge): State<Arc<Edge>>, mut request: Request) -> Respon
             }
         },
     };
-    let rest = if rest.is_empty() {
-        "/".to_string()
-    } else {
-        rest
-    };
-    let uri = match request.uri().query() {
-        Some(query) => format!("{rest}?{query}"),
-        None => rest,
-    };
+    let query = request
+        .uri()
+        .query()
+        .map(|q| format!("?{q}"))
+        .unwrap_or_default();
+    let uri = format!("{rest}{query}");
     match uri.parse::<Uri>() {
         Ok(uri) => *request.uri_mut() = uri,
         Err(_) => return (StatusCode::BAD_REQUEST, "malformed path\n").into_response(),
@@ -154,21 +163,34 @@ struct Snapshot {
     tag: Tag,
     geometry: GeometryState,
     state: Published,
+    record: SceneRecord,
+    record_version: u64,
 }
+
+/// How long reading one snapshot object may take: a read that races the object's replacement
+/// (its chunks purged under it) would otherwise wait forever.
+const READ_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(5);
 
 async fn read_object(
     objects: &object_store::ObjectStore,
     name: &str,
 ) -> anyhow::Result<(Tag, Vec<u8>)> {
-    let mut object = objects
-        .get(name)
+    let read = async {
+        let mut object = objects
+            .get(name)
+            .await
+            .map_err(|e| anyhow::anyhow!("cannot read {name}: {e}"))?;
+        let tag = Tag::from_metadata(&object.info().metadata)
+            .ok_or_else(|| anyhow::anyhow!("{name} carries no radcast tag"))?;
+        let mut bytes = Vec::with_capacity(object.info().size);
+        object.read_to_end(&mut bytes).await?;
+        Ok((tag, bytes))
+    };
+    tokio::time::timeout(READ_TIMEOUT, read)
         .await
-        .map_err(|e| anyhow::anyhow!("cannot read {name}: {e}"))?;
-    let tag = Tag::from_metadata(&object.info().metadata)
-        .ok_or_else(|| anyhow::anyhow!("{name} carries no radcast tag"))?;
-    let mut bytes = Vec::with_capacity(object.info().size);
-    object.read_to_end(&mut bytes).await?;
-    Ok((tag, bytes))
+        .map_err(|_| {
+            anyhow::anyhow!("reading {name} took over {READ_TIMEOUT:?} (replaced meanwhile?)")
+        })?
 }
 
 async fn read_geometry(
@@ -196,10 +218,17 @@ async fn read_snapshot(
         anyhow::bail!("{} is not a full frame", full_object(scene));
     };
     let state = Published::new(frame.info, frame.colours, None, tag.geometry_version);
+    let (record_tag, record) = read_object(objects, &record_object(scene)).await?;
+    let record: SceneRecord = serde_json::from_slice(&record)?;
+    if record.run != tag.run {
+        anyhow::bail!("the record of '{scene}' is being replaced");
+    }
     Ok(Snapshot {
         tag,
         geometry,
         state,
+        record,
+        record_version: record_tag.version,
     })
 }
 
@@ -217,6 +246,7 @@ pub async fn follow(edge: Arc<Edge>) {
     };
     tokio::spawn(watch_health(edge.clone()));
     let mut connects = edge.nats.connects.clone();
+    connects.mark_unchanged();
     let mut tick = tokio::time::interval(super::ALIVE_INTERVAL);
     loop {
         let objects = match edge.nats.snapshots().await {
@@ -240,8 +270,14 @@ pub async fn follow(edge: Arc<Edge>) {
             tokio::select! {
                 change = watch.next() => match change {
                     Some(Ok(info)) => {
+                        let tag = Tag::from_metadata(&info.metadata);
                         if let Some(scene) = info.name.strip_suffix(RECORD_SUFFIX).filter(|_| !info.deleted) {
-                            edge.take_stored_record(&objects, scene).await;
+                            // A known run's records come ahead of its frames; only a new scene
+                            // or a new run needs the stored one.
+                            let known = edge.scene(scene).is_some_and(|s| tag.is_some_and(|t| t.run == upstream(&s).run));
+                            if !known {
+                                edge.serve_or_retry(&objects, scene).await;
+                            }
                         }
                     }
                     // The watch ends with its connection: make it again.
@@ -253,7 +289,13 @@ pub async fn follow(edge: Arc<Edge>) {
                     Some("alive") => edge.heard(&message),
                     _ => {}
                 },
-                _ = tick.tick() => edge.resync_stale(&objects).await,
+                _ = tick.tick() => {
+                    let pending = std::mem::take(&mut *edge.pending.lock().expect("pending lock"));
+                    for scene in pending {
+                        edge.serve_or_retry(&objects, &scene).await;
+                    }
+                    edge.resync_stale(&objects).await;
+                }
                 _ = connects.changed() => {
                     // Frames sent while disconnected are lost: read every snapshot again.
                     for name in edge.scene_names() {
@@ -280,9 +322,17 @@ async fn watch_health(edge: Arc<Edge>) {
     }
 }
 
-/// The report, emissions and origin health of `record`, for `/api/solution`, `/api/objects`
+/// The report, emissions and origin health of `record` (sent with solution `version`; none
+/// older than the one in use), for `/api/solution`, `/api/objects`
 /// and `/healthz`.
-fn take_record(shared: &Shared, scene: &str, record: SceneRecord) {
+fn take_record(shared: &Shared, scene: &str, record: SceneRecord, version: u64) {
+    if upstream(shared)
+        .record_version
+        .fetch_max(version, Ordering::Relaxed)
+        > version
+    {
+        return;
+    }
     *shared.report.lock().expect("report lock") = record.report;
     *shared.emissions.lock().expect("emissions lock") = record.emissions;
     match record.health.as_str() {
@@ -311,27 +361,12 @@ fn header(message: &async_nats::Message, name: &str) -> Option<String> {
 }
 
 impl Edge {
-    /// A stored scene record: a new scene (or a restarted origin) is read from its
-    /// snapshot; a known one takes the record.
-    async fn take_stored_record(&self, objects: &object_store::ObjectStore, scene: &str) {
-        let record: SceneRecord = match read_object(objects, &record_object(scene))
-            .await
-            .and_then(|(_, bytes)| Ok(serde_json::from_slice(&bytes)?))
-        {
-            Ok(record) => record,
-            Err(error) => {
-                tracing::warn!("edge: the record of '{scene}' is unreadable: {error:#}");
-                return;
-            }
-        };
-        let shared = match self.scene(scene) {
-            Some(shared) if upstream(&shared).run == record.run => shared,
-            _ => match self.start_serving(objects, scene).await {
-                Some(shared) => shared,
-                None => return,
-            },
-        };
-        take_record(&shared, scene, record);
+    /// Serves `scene` from its snapshot, or notes it to try again a second later.
+    async fn serve_or_retry(&self, objects: &object_store::ObjectStore, scene: &str) {
+        if self.start_serving(objects, scene).await.is_none() {
+            let mut pending = self.pending.lock().expect("pending lock");
+            pending.insert(scene.to_string());
+        }
     }
 
     /// A record sent ahead of a frame, for a scene served now.
@@ -341,17 +376,19 @@ impl Edge {
         else {
             return;
         };
+        let version = header(message, headers::VERSION).and_then(|v| v.parse::<u64>().ok());
         match serde_json::from_slice::<SceneRecord>(&message.payload) {
             Ok(record) if record.run == upstream(&shared).run => {
-                take_record(&shared, scene, record)
+                let Some(version) = version else { return };
+                take_record(&shared, scene, record, version)
             }
             Ok(_) => {}
             Err(error) => tracing::warn!("edge: a record of '{scene}' is unreadable: {error}"),
         }
     }
 
-    /// Serves `scene` from its snapshot, replacing (and closing the viewers of) an earlier
-    /// run's copy.
+    /// Serves `scene` from its snapshot and record, replacing (and closing the viewers of) an
+    /// earlier run's copy.
     async fn start_serving(
         &self,
         objects: &object_store::ObjectStore,
@@ -360,7 +397,7 @@ impl Edge {
         let snapshot = match read_snapshot(objects, scene).await {
             Ok(snapshot) => snapshot,
             Err(error) => {
-                tracing::warn!("edge: cannot serve '{scene}' yet: {error:#}");
+                tracing::warn!("edge: cannot serve '{scene}' yet: {error:#}; trying again");
                 return None;
             }
         };
@@ -369,10 +406,13 @@ impl Edge {
             scene: scene.to_string(),
             run: snapshot.tag.run.clone(),
             last_heard: Instant::now().into(),
+            record_version: 0.into(),
             stale: false.into(),
         };
         let hub = Hub::restore(snapshot.geometry, snapshot.state);
         let shared = Shared::in_process(self.process.clone(), hub, String::new(), Some(upstream));
+        // Before anyone can ask: /api/solution must not answer without the report.
+        take_record(&shared, scene, snapshot.record, snapshot.record_version);
         let served = Arc::new(Served {
             router: crate::routes::router(shared.clone()),
             shared: shared.clone(),
@@ -416,10 +456,8 @@ impl Edge {
                 Ok((tag, geometry)) if tag.version == geometry_version && tag.run == link.run => {
                     shared.hub.install_geometry(geometry)
                 }
-                _ => {
-                    link.stale.store(true, Ordering::Relaxed);
-                    return;
-                }
+                // The geometry moved on again: the snapshot has the newest.
+                _ => return self.resync(objects, &link.scene, &shared, version).await,
             }
         }
         let next = match ServerMessage::decode(&message.payload) {
@@ -450,7 +488,7 @@ impl Edge {
         };
         match next {
             Some(state) if state.version == version => shared.hub.install(state),
-            _ => link.stale.store(true, Ordering::Relaxed),
+            _ => self.resync(objects, &link.scene, &shared, version).await,
         }
     }
 
@@ -485,32 +523,47 @@ impl Edge {
         }
     }
 
-    /// Reads the snapshot of every scene a frame could not be applied to.
+    /// Reads the snapshot of every scene marked stale (a reconnect, or a read that failed).
     async fn resync_stale(&self, objects: &object_store::ObjectStore) {
         for name in self.scene_names() {
-            let Some(shared) = self.scene(&name) else {
-                continue;
-            };
-            let link = upstream(&shared);
-            if !link.stale.swap(false, Ordering::Relaxed) {
-                continue;
+            if let Some(shared) = self.scene(&name) {
+                if upstream(&shared).stale.swap(false, Ordering::Relaxed) {
+                    self.resync(objects, &name, &shared, 0).await;
+                }
             }
-            match read_snapshot(objects, &name).await {
-                Ok(snapshot) if snapshot.tag.run != link.run => {
-                    self.start_serving(objects, &name).await;
+        }
+    }
+
+    /// Serves the stored snapshot of `name` (a new run's from scratch); when it cannot be read,
+    /// or is older than version `at_least`, the scene is marked stale: read again a second later.
+    async fn resync(
+        &self,
+        objects: &object_store::ObjectStore,
+        name: &str,
+        shared: &Shared,
+        at_least: u64,
+    ) {
+        let link = upstream(shared);
+        tracing::debug!(scene = name, at_least, "reading the snapshot");
+        match read_snapshot(objects, name).await {
+            Ok(snapshot) if snapshot.tag.run != link.run => {
+                self.start_serving(objects, name).await;
+            }
+            Ok(snapshot) => {
+                if snapshot.geometry.version != shared.hub.geometry().version {
+                    shared.hub.install_geometry(snapshot.geometry);
                 }
-                Ok(snapshot) => {
-                    if snapshot.geometry.version != shared.hub.geometry().version {
-                        shared.hub.install_geometry(snapshot.geometry);
-                    }
-                    if snapshot.state.version != shared.hub.current().version {
-                        shared.hub.install(snapshot.state);
-                    }
-                }
-                Err(error) => {
-                    tracing::warn!("edge: cannot read the snapshot of '{name}': {error:#}");
+                if snapshot.state.version < at_least {
                     link.stale.store(true, Ordering::Relaxed);
                 }
+                if snapshot.state.version > shared.hub.current().version {
+                    shared.hub.install(snapshot.state);
+                }
+                take_record(shared, name, snapshot.record, snapshot.record_version);
+            }
+            Err(error) => {
+                tracing::warn!("edge: cannot read the snapshot of '{name}': {error:#}");
+                link.stale.store(true, Ordering::Relaxed);
             }
         }
     }

@@ -251,6 +251,9 @@ pub struct Upstream {
     pub run: String,
     /// When the origin last said it was alive (or sent anything).
     pub last_heard: std::sync::Mutex<std::time::Instant>,
+    /// The solution version the record in use was sent with: an older one (a snapshot read
+    /// while a newer record was on its way) is not taken.
+    pub record_version: std::sync::atomic::AtomicU64,
     /// Set when a frame could not be applied (a gap, a newer geometry not yet stored): the
     /// snapshot is read again.
     pub stale: std::sync::atomic::AtomicBool,

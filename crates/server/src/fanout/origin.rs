@@ -34,6 +34,7 @@ pub async fn serve(shared: Arc<Shared>, nats: Nats, scene: String, run: String) 
 async fn publish(shared: &Shared, nats: &Nats, scene: &str, run: &str) {
     let mut updates = shared.hub.subscribe();
     let mut connects = nats.connects.clone();
+    connects.mark_unchanged();
     let mut alive = tokio::time::interval(super::ALIVE_INTERVAL);
     let mut store = None;
     let mut sent = None;
@@ -61,8 +62,9 @@ async fn publish(shared: &Shared, nats: &Nats, scene: &str, run: &str) {
     }
 }
 
-/// Sends what NATS lacks of the hub's newest state: the geometry and full frame snapshots,
-/// the record when it changed, then the frame (the delta when NATS holds its base).
+/// Sends what NATS lacks of the hub's newest state: the geometry snapshot when it changed,
+/// the record when it changed, the frame (the delta when NATS holds its base), then the full
+/// frame and record snapshots.
 async fn publish_newest(
     shared: &Shared,
     nats: &Nats,
@@ -97,41 +99,53 @@ async fn publish_newest(
         )
         .await?;
     }
-    let new_version = held.map(|(v, _)| v) != Some(current.version);
-    if new_version {
-        let tag = tag(current.version);
-        put(objects, &full_object(scene), tag, &current.full).await?;
-    }
     let record = SceneRecord {
         run: run.to_string(),
         report: shared.report.lock().expect("report lock").clone(),
         emissions: shared.emissions.lock().expect("emissions lock").clone(),
         health: shared.health.text(),
     };
-    if sent.as_ref().map(|s| &s.record) != Some(&record) {
-        let json = serde_json::to_vec(&record)?;
-        put(objects, &record_object(scene), tag(current.version), &json).await?;
+    let record_json = match sent.as_ref().map(|s| &s.record) != Some(&record) {
+        true => Some(serde_json::to_vec(&record)?),
+        false => None,
+    };
+    if let Some(json) = &record_json {
         // Before the frame, on the same connection: edges get the two in this order.
+        let mut record_headers = async_nats::HeaderMap::new();
+        record_headers.insert(headers::VERSION, current.version.to_string());
         nats.client
-            .publish(record_subject(scene), json.into())
+            .publish_with_headers(record_subject(scene), record_headers, json.clone().into())
             .await?;
     }
-    if new_version {
-        let mut payload = match &current.delta {
+    if held.map(|(v, _)| v) != Some(current.version) {
+        let payload = match &current.delta {
             Some((base, delta)) if held.map(|(v, _)| v) == Some(*base) => delta.clone(),
             _ => current.full.clone(),
         };
-        if payload.len() > nats.client.server_info().max_payload {
-            // Too big for one message: edges read the snapshot just written.
-            payload = Bytes::new();
-        }
         let mut frame_headers = async_nats::HeaderMap::new();
         frame_headers.insert(headers::VERSION, current.version.to_string());
         frame_headers.insert(headers::GEOMETRY, geometry.version.to_string());
         frame_headers.insert(headers::RUN, run);
-        nats.client
-            .publish_with_headers(frame_subject(scene), frame_headers, payload)
-            .await?;
+        let subject = frame_subject(scene);
+        let full_name = full_object(scene);
+        let full = |objects| put(objects, &full_name, tag(current.version), &current.full);
+        if payload.len() <= nats.client.server_info().max_payload {
+            // The frame first, for latency; the snapshot right after, for edges that missed it
+            // (one that asks in between retries a second later).
+            nats.client
+                .publish_with_headers(subject, frame_headers, payload)
+                .await?;
+            full(objects).await?;
+        } else {
+            // Too big for one message: an empty announcement after the snapshot is stored.
+            full(objects).await?;
+            nats.client
+                .publish_with_headers(subject, frame_headers, Bytes::new())
+                .await?;
+        }
+    }
+    if let Some(json) = &record_json {
+        put(objects, &record_object(scene), tag(current.version), json).await?;
     }
     *sent = Some(Sent {
         version: current.version,
