@@ -81,7 +81,7 @@ async fn origin(url: &str, name: &str) -> Origin {
     }
 }
 
-/// An edge following NATS at `url`, serving `name` at its root.
+/// An edge following NATS at `url`, serving `root` at its root (without, its only scene).
 struct EdgeServer {
     address: SocketAddr,
     edge: Arc<Edge>,
@@ -94,12 +94,12 @@ impl Drop for EdgeServer {
     }
 }
 
-async fn edge(url: &str, name: &str) -> EdgeServer {
+async fn edge(url: &str, root: impl Into<Option<&str>>) -> EdgeServer {
     let process = Process::new(Limits::default());
     let edge = Edge::new(
         process.clone(),
         connect(url, "test edge").await,
-        Some(name.into()),
+        root.into().map(str::to_string),
     );
     tokio::spawn(fanout::edge::follow(edge.clone()));
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
@@ -434,6 +434,39 @@ async fn edges_keep_serving_a_dead_origin_and_viewers_move_on_from_a_dead_edge()
         .await
         .expect("edge B serves");
     assert_eq!(wire::checksum(&outcome.buffer.colours), checksum);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn one_edge_serves_every_scene_published_each_under_its_name() {
+    let Some((nats, _own)) = test_nats() else {
+        return;
+    };
+    let names = ["test-several-a", "test-several-b"];
+    let edge = edge(&nats, None).await;
+    let origins = [origin(&nats, names[0]).await, origin(&nats, names[1]).await];
+    for (origin, name) in origins.iter().zip(names) {
+        let (version, checksum) = origin_final(origin).await;
+        let served = edge.edge.serving(name, &origin.run).await;
+        final_state(&served, version, checksum).await;
+        for path in ["/api/solution", "/api/scene"] {
+            let on_edge = get(edge.address, &format!("/scenes/{name}{path}")).await;
+            assert_eq!(on_edge, get(origin.address, path).await, "{name}{path}");
+        }
+    }
+    let (status, scenes) = get_text(edge.address, "/scenes").await;
+    assert_eq!(status, 200);
+    for name in names {
+        assert!(scenes.contains(&format!("\"{name}\"")), "{scenes}");
+    }
+    // With several scenes and none named at start, the root says how to choose.
+    let (status, text) = get_text(edge.address, "/healthz").await;
+    assert_eq!(status, 503, "{text}");
+    assert!(text.contains("use /scenes/NAME/"), "{text}");
+    let (status, text) = get_text(edge.address, "/scenes/no-such-scene/api/solution").await;
+    assert_eq!(
+        (status, text.trim()),
+        (404, "no scene named 'no-such-scene' on this edge")
+    );
 }
 
 /// A `nats-server` of this test's own (JetStream on, stored in a temporary folder), so it can

@@ -1,51 +1,25 @@
 //! `radcast-client watch | head -1`: a reader that goes away ends the client quietly.
 
-use futures_util::SinkExt;
+mod common;
+
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
-use tokio_tungstenite::tungstenite::Message;
-use wire::{FrameInfo, FullFrame, Hello, ServerMessage};
 
 /// A server that says hello, then sends a new full frame every few milliseconds until the
 /// viewer hangs up.
 async fn chatty_server() -> std::net::SocketAddr {
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let address = listener.local_addr().unwrap();
-    tokio::spawn(async move {
-        let (stream, _) = listener.accept().await.unwrap();
-        let mut socket = tokio_tungstenite::accept_async(stream).await.unwrap();
-        let hello = Hello {
-            protocol_version: wire::PROTOCOL_VERSION,
-            scene_id: 1,
-            geometry_version: 1,
-            vertex_count: 1,
-        };
-        let send = |m: ServerMessage| Message::Binary(m.encode().into());
-        if socket
-            .send(send(ServerMessage::Hello(hello)))
-            .await
-            .is_err()
-        {
+    common::serve_one(|mut socket| async move {
+        if !common::send_hello(&mut socket).await {
             return;
         }
         for version in 1.. {
-            let frame = FullFrame {
-                info: FrameInfo {
-                    solution_version: version,
-                    sent_at_unix_micros: wire::unix_micros_now(),
-                    scale: 1.0,
-                    vertex_count: 1,
-                    is_final: false,
-                },
-                colours: vec![wire::encode_colour([version as f32, 0.0, 0.0], 1.0)],
-            };
-            if socket.send(send(ServerMessage::Full(frame))).await.is_err() {
+            if !common::send_full(&mut socket, version, false).await {
                 return;
             }
             tokio::time::sleep(std::time::Duration::from_millis(5)).await;
         }
-    });
-    address
+    })
+    .await
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
