@@ -1,7 +1,10 @@
 //! Changing emission on a running server: authentication, validation, coalescing, and viewers
 //! that end equal to a from-scratch solve of the edited scene.
 
-use futures_util::StreamExt;
+mod common;
+
+use common::http::{edit_and_wait, get_text, put};
+use common::viewer::Viewer;
 use server::health::Fault;
 use server::prepared::{prepare, shared_for};
 use server::solving;
@@ -9,12 +12,9 @@ use server::{Limits, Shared};
 use solver::{HierarchySettings, MethodChoice, MoveWork, PatchTarget, Rgb, SolveRequest};
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::time::Duration;
-use tokio_tungstenite::tungstenite::Message;
-use wire::{ColourBuffer, ServerMessage};
+use wire::ColourBuffer;
 
 const TOKEN: &str = "s3cret";
-const PATIENCE: Duration = Duration::from_secs(60);
 
 fn request() -> SolveRequest {
     SolveRequest {
@@ -46,82 +46,6 @@ async fn live(scene: &str, request: SolveRequest) -> (SocketAddr, Arc<Shared>, E
     solving::start(prepared, shared.clone(), None);
     let edit_loop = EditLoop(shared.clone());
     (address, shared, edit_loop)
-}
-
-/// PUT with an optional bearer token; returns the status and the body.
-async fn put(address: SocketAddr, path: &str, token: Option<&str>, body: &str) -> (u16, String) {
-    let (url, body, token) = (
-        format!("http://{address}{path}"),
-        body.to_string(),
-        token.map(str::to_string),
-    );
-    tokio::task::spawn_blocking(move || {
-        let agent: ureq::Agent = ureq::Agent::config_builder()
-            .http_status_as_error(false)
-            .build()
-            .into();
-        let mut request = agent.put(&url).header("Content-Type", "application/json");
-        if let Some(token) = token {
-            request = request.header("Authorization", &format!("Bearer {token}"));
-        }
-        let mut response = request.send(body.as_bytes()).unwrap();
-        (
-            response.status().as_u16(),
-            response.body_mut().read_to_string().unwrap(),
-        )
-    })
-    .await
-    .unwrap()
-}
-
-/// A viewer that keeps its buffer current; `wait_for` reads until a final frame satisfies `done`.
-struct Viewer {
-    socket: tokio_tungstenite::WebSocketStream<
-        tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
-    >,
-    buffer: ColourBuffer,
-    deltas: Vec<usize>,
-    geometry_versions: Vec<u64>,
-}
-
-impl Viewer {
-    async fn connect(address: SocketAddr) -> Viewer {
-        let (socket, _) = tokio_tungstenite::connect_async(format!("ws://{address}/ws"))
-            .await
-            .unwrap();
-        Viewer {
-            socket,
-            buffer: ColourBuffer::default(),
-            deltas: Vec::new(),
-            geometry_versions: Vec::new(),
-        }
-    }
-
-    async fn wait_for(&mut self, done: impl Fn(&ColourBuffer) -> bool) {
-        tokio::time::timeout(PATIENCE, async {
-            while !(self.buffer.info.is_some_and(|i| i.is_final) && done(&self.buffer)) {
-                let Some(Ok(Message::Binary(bytes))) = self.socket.next().await else {
-                    continue;
-                };
-                let message = ServerMessage::decode(&bytes).unwrap();
-                if let ServerMessage::Delta(delta) = &message {
-                    self.deltas.push(delta.indices.len());
-                }
-                if let ServerMessage::GeometryChanged { geometry_version } = message {
-                    self.geometry_versions.push(geometry_version);
-                }
-                self.buffer
-                    .apply(&message)
-                    .expect("deltas apply to what the viewer holds");
-            }
-        })
-        .await
-        .expect("the expected state arrives");
-    }
-
-    fn version(&self) -> u64 {
-        self.buffer.info.map_or(0, |i| i.solution_version)
-    }
 }
 
 /// The Cornell box solved from scratch with the light's emission replaced.
@@ -188,7 +112,7 @@ async fn an_emission_change_reaches_every_viewer_as_a_delta_equal_to_a_fresh_sol
     }
     assert_eq!(viewers[0].buffer.colours, viewers[1].buffer.colours);
     // /api/objects lists every object with the emission the solution has now.
-    let (status, body) = get(address, "/api/objects").await;
+    let (status, body) = get_text(address, "/api/objects").await;
     assert_eq!(status, 200);
     let objects: serde_json::Value = serde_json::from_str(&body).unwrap();
     let emission = |name: &str| {
@@ -616,47 +540,12 @@ fn a_hierarchical_server_prepares_without_refining_so_its_port_opens_at_once() {
     assert_eq!(prepared.geometry.patches.len(), prepared.scene.faces.len());
 }
 
-/// GET `path`; returns the status and the body.
-async fn get(address: SocketAddr, path: &str) -> (u16, String) {
-    let url = format!("http://{address}{path}");
-    tokio::task::spawn_blocking(move || {
-        let agent: ureq::Agent = ureq::Agent::config_builder()
-            .http_status_as_error(false)
-            .build()
-            .into();
-        let mut response = agent.get(&url).call().unwrap();
-        (
-            response.status().as_u16(),
-            response.body_mut().read_to_string().unwrap(),
-        )
-    })
-    .await
-    .unwrap()
-}
-
-/// PUTs an edit with the token, expects it queued, and waits until the solver has finished
-/// the batch it went into (applied or refused).
-async fn edit_and_wait(
-    address: SocketAddr,
-    finished: &mut tokio::sync::watch::Receiver<u64>,
-    path: &str,
-    body: &str,
-) {
-    let done = *finished.borrow_and_update() + 1;
-    let (status, reply) = put(address, path, Some(TOKEN), body).await;
-    assert_eq!(status, 202, "{reply}");
-    tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= done))
-        .await
-        .expect("the batch is finished")
-        .unwrap();
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_edit_the_solver_refuses_is_reported_and_the_next_edit_still_applies() {
     let (address, shared, _edit_loop) = live_cornell().await;
     let mut viewer = Viewer::connect(address).await;
     viewer.wait_for(|_| true).await;
-    assert_eq!(get(address, "/healthz").await, (200, "ok\n".into()));
+    assert_eq!(get_text(address, "/healthz").await, (200, "ok\n".into()));
     // Each move is within bounds on its own; the second would carry the block past 1e30.
     let mut finished = shared.edits.finished();
     for expect_fault in [false, true] {
@@ -664,20 +553,21 @@ async fn an_edit_the_solver_refuses_is_reported_and_the_next_edit_still_applies(
         edit_and_wait(
             address,
             &mut finished,
+            TOKEN,
             path,
             r#"{"translate": [9e29, 0, 0]}"#,
         )
         .await;
         assert_eq!(shared.health.total(Fault::Edit), expect_fault as u64);
     }
-    let (status, health) = get(address, "/healthz").await;
+    let (status, health) = get_text(address, "/healthz").await;
     assert_eq!(status, 200);
     assert!(
         health.starts_with("degraded: the move of 'tall_block' was refused:")
             && health.contains("past 1e30"),
         "{health}"
     );
-    let (_, metrics) = get(address, "/metrics").await;
+    let (_, metrics) = get_text(address, "/metrics").await;
     assert!(
         metrics.contains("radcast_faults_total{kind=\"edit\"} 1\n")
             && metrics.contains("radcast_solver_up 1\n"),
@@ -685,7 +575,14 @@ async fn an_edit_the_solver_refuses_is_reported_and_the_next_edit_still_applies(
     );
     // The solver is alive: a light edit applies, and health recovers with it.
     let path = "/api/objects/light/emission";
-    edit_and_wait(address, &mut finished, path, r#"{"emission": [5, 5, 5]}"#).await;
+    edit_and_wait(
+        address,
+        &mut finished,
+        TOKEN,
+        path,
+        r#"{"emission": [5, 5, 5]}"#,
+    )
+    .await;
     let published = shared.hub.current().version;
     viewer
         .wait_for(|buffer| buffer.info.is_some_and(|i| i.solution_version == published))
@@ -698,5 +595,5 @@ async fn an_edit_the_solver_refuses_is_reported_and_the_next_edit_still_applies(
             .flatten()
             .all(|c| c.is_finite())
     );
-    assert_eq!(get(address, "/healthz").await, (200, "ok\n".into()));
+    assert_eq!(get_text(address, "/healthz").await, (200, "ok\n".into()));
 }

@@ -4,6 +4,10 @@
 //! Origins and edges run in this process; "killing" one shuts it down: its listener, viewers,
 //! heartbeat and publishing stop, as they do when the process dies.
 
+mod common;
+
+use common::http::{edit_and_wait, get, get_text, put};
+use common::viewer::Viewer;
 use futures_util::StreamExt;
 use server::fanout::{self, Nats, edge::Edge};
 use server::prepared::{prepare, shared_for};
@@ -13,7 +17,6 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 use tokio_tungstenite::tungstenite::Message;
-use wire::{ColourBuffer, ServerMessage};
 
 const TOKEN: &str = "fan-out-token";
 /// Generous bound on waits that take milliseconds to seconds; a hang fails instead of blocking.
@@ -139,53 +142,6 @@ async fn origin_final(origin: &Origin) -> (u64, u32) {
     (state.version, state.checksum)
 }
 
-/// GET `path`: status and body bytes.
-async fn get(address: SocketAddr, path: &str) -> (u16, Vec<u8>) {
-    let url = format!("http://{address}{path}");
-    tokio::task::spawn_blocking(move || {
-        let agent: ureq::Agent = ureq::Agent::config_builder()
-            .http_status_as_error(false)
-            .build()
-            .into();
-        let mut response = agent.get(&url).call().unwrap();
-        let status = response.status().as_u16();
-        (status, response.body_mut().read_to_vec().unwrap())
-    })
-    .await
-    .unwrap()
-}
-
-async fn get_text(address: SocketAddr, path: &str) -> (u16, String) {
-    let (status, body) = get(address, path).await;
-    (status, String::from_utf8(body).unwrap())
-}
-
-/// PUT with an optional bearer token; returns the status and the body.
-async fn put(address: SocketAddr, path: &str, token: Option<&str>, body: &str) -> (u16, String) {
-    let (url, body, token) = (
-        format!("http://{address}{path}"),
-        body.to_string(),
-        token.map(str::to_string),
-    );
-    tokio::task::spawn_blocking(move || {
-        let agent: ureq::Agent = ureq::Agent::config_builder()
-            .http_status_as_error(false)
-            .build()
-            .into();
-        let mut request = agent.put(&url);
-        if let Some(token) = token {
-            request = request.header("Authorization", &format!("Bearer {token}"));
-        }
-        let mut response = request.send(body.as_bytes()).unwrap();
-        (
-            response.status().as_u16(),
-            response.body_mut().read_to_string().unwrap(),
-        )
-    })
-    .await
-    .unwrap()
-}
-
 /// Polls `/healthz` until its text starts with `prefix` (the edge checks once a second).
 async fn health_becomes(address: SocketAddr, prefix: &str) -> String {
     tokio::time::timeout(PATIENCE, async {
@@ -215,47 +171,6 @@ async fn first_messages(address: SocketAddr) -> Vec<Vec<u8>> {
     messages
 }
 
-/// A viewer that applies every frame; `ends_with` reads until it holds `checksum`, final.
-struct Viewer {
-    socket: tokio_tungstenite::WebSocketStream<
-        tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
-    >,
-    buffer: ColourBuffer,
-}
-
-impl Viewer {
-    async fn connect(address: SocketAddr) -> Viewer {
-        let (socket, _) = tokio_tungstenite::connect_async(format!("ws://{address}/ws"))
-            .await
-            .unwrap();
-        Viewer {
-            socket,
-            buffer: ColourBuffer::default(),
-        }
-    }
-
-    async fn ends_with(&mut self, checksum: u32) {
-        tokio::time::timeout(PATIENCE, async {
-            while !(self.buffer.info.is_some_and(|i| i.is_final)
-                && wire::checksum(&self.buffer.colours) == checksum)
-            {
-                match self.socket.next().await {
-                    Some(Ok(Message::Binary(bytes))) => {
-                        let message = ServerMessage::decode(&bytes).unwrap();
-                        self.buffer
-                            .apply(&message)
-                            .expect("deltas apply to what the viewer holds");
-                    }
-                    Some(Ok(_)) => {}
-                    other => panic!("the viewer's connection ended: {other:?}"),
-                }
-            }
-        })
-        .await
-        .expect("the viewer ends on the expected state");
-    }
-}
-
 /// Everything a viewer or a client can ask of a server, which must be equal on origin and edge.
 async fn served_bytes(address: SocketAddr) -> Vec<Vec<u8>> {
     let mut all = Vec::new();
@@ -279,17 +194,25 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
         return;
     };
     let name = "test-same-bytes";
-    let edge_a = edge(&nats, name).await;
+    let (edge_a, edge_b) = (edge(&nats, name).await, edge(&nats, name).await);
     let origin = origin(&nats, name).await;
-    let (version, checksum) = origin_final(&origin).await;
-    let on_a = edge_a.edge.serving(name, &origin.run).await;
-    final_state(&on_a, version, checksum).await;
-    assert_eq!(
-        served_bytes(edge_a.address).await,
-        served_bytes(origin.address).await
-    );
-    let mut viewer = Viewer::connect(edge_a.address).await;
-    viewer.ends_with(checksum).await;
+    let (_, checksum) = origin_final(&origin).await;
+    let on_edges = [
+        edge_a.edge.serving(name, &origin.run).await,
+        edge_b.edge.serving(name, &origin.run).await,
+    ];
+    let servers = [origin.address, edge_a.address, edge_b.address];
+    let mut viewers = Vec::new();
+    for address in servers {
+        viewers.push(Viewer::connect(address).await);
+    }
+    for (viewer, address) in viewers.iter_mut().zip(servers) {
+        viewer.ends_with(checksum).await;
+        assert_eq!(
+            served_bytes(address).await,
+            served_bytes(origin.address).await
+        );
+    }
     let before = checksum;
 
     // An edit sent to the edge reaches the origin, which answers as it would itself.
@@ -313,64 +236,70 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
     );
     assert_eq!(refused.0, 401, "{}", refused.1);
     let mut finished = origin.shared.edits.finished();
-    let done = *finished.borrow_and_update() + 2;
-    let queued = put(
+    edit_and_wait(
         edge_a.address,
+        &mut finished,
+        TOKEN,
         path,
-        Some(TOKEN),
         r#"{"emission": [30, 20, 10]}"#,
     )
     .await;
-    assert_eq!(queued.0, 202, "{}", queued.1);
     // A move, sent to the origin: new geometry travels too.
-    let moved = put(
-        origin.address,
-        "/api/objects/tall_block/transform",
-        Some(TOKEN),
+    let (address, path) = (origin.address, "/api/objects/tall_block/transform");
+    edit_and_wait(
+        address,
+        &mut finished,
+        TOKEN,
+        path,
         r#"{"translate": [20, 0, -15]}"#,
     )
     .await;
-    assert_eq!(moved.0, 202, "{}", moved.1);
-    tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= done))
-        .await
-        .expect("both edits are applied")
-        .unwrap();
     let (version, checksum) = origin_final(&origin).await;
     assert_ne!(checksum, before, "the edits changed the solution");
-    final_state(&on_a, version, checksum).await;
-    viewer.ends_with(checksum).await;
-    assert_eq!(
-        on_a.hub.geometry().version,
-        2,
-        "the move's geometry reached the edge"
-    );
-    assert_eq!(
-        served_bytes(edge_a.address).await,
-        served_bytes(origin.address).await
-    );
+    // Viewers on the origin and on both edges end on it; everything served is the origin's.
+    for on_edge in &on_edges {
+        final_state(on_edge, version, checksum).await;
+        assert_eq!(
+            on_edge.hub.geometry().version,
+            2,
+            "the move's geometry reached the edge"
+        );
+    }
+    for (viewer, address) in viewers.iter_mut().zip(servers) {
+        viewer.ends_with(checksum).await;
+        assert_eq!(
+            viewer.geometry_versions,
+            [2],
+            "{address}: told of the move once"
+        );
+        assert_eq!(
+            served_bytes(address).await,
+            served_bytes(origin.address).await
+        );
+    }
 
     // An edge started now is served from the snapshots at once, without the origin's help.
-    let edge_b = edge(&nats, name).await;
-    let on_b = edge_b.edge.serving(name, &origin.run).await;
+    let edge_c = edge(&nats, name).await;
+    let on_c = edge_c.edge.serving(name, &origin.run).await;
     assert_eq!(
-        (on_b.hub.current().version, on_b.hub.current().checksum),
+        (on_c.hub.current().version, on_c.hub.current().checksum),
         (version, checksum)
     );
     assert_eq!(
-        served_bytes(edge_b.address).await,
+        served_bytes(edge_c.address).await,
         served_bytes(origin.address).await
     );
-    let (status, scenes) = get_text(edge_b.address, "/scenes").await;
+    let (status, scenes) = get_text(edge_c.address, "/scenes").await;
     assert_eq!(status, 200);
     assert!(scenes.contains(&format!("\"{name}\"")), "{scenes}");
     // The same scene under its name, as an edge serving several would.
-    let (status, solution) = get(edge_b.address, &format!("/scenes/{name}/api/solution")).await;
+    let (status, solution) = get(edge_c.address, &format!("/scenes/{name}/api/solution")).await;
     assert_eq!(
         (status, solution),
         get(origin.address, "/api/solution").await
     );
     // The browser page too, its links relative (`/scenes/NAME` redirects to `/scenes/NAME/`).
-    let page = get(edge_b.address, &format!("/scenes/{name}")).await;
+    let page = get(edge_c.address, &format!("/scenes/{name}")).await;
     assert_eq!(page, get(origin.address, "/").await);
     assert!(String::from_utf8_lossy(&page.1).contains("src=\"viewer.js\""));
 }
@@ -560,19 +489,11 @@ async fn after_nats_restarts_edges_resync_and_viewers_end_on_the_final_state() {
     assert!(health.contains("NATS is unreachable"), "{health}");
     // An edit while NATS is down: the origin applies it; edges cannot hear of it yet.
     let mut finished = origin.shared.edits.finished();
-    let done = *finished.borrow_and_update() + 1;
-    let queued = put(
-        origin.address,
+    let (path, body) = (
         "/api/objects/light/emission",
-        Some(TOKEN),
         r#"{"emission": [40, 40, 40]}"#,
-    )
-    .await;
-    assert_eq!(queued.0, 202, "{}", queued.1);
-    tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= done))
-        .await
-        .expect("the edit is applied")
-        .unwrap();
+    );
+    edit_and_wait(origin.address, &mut finished, TOKEN, path, body).await;
     let (version, checksum) = origin_final(&origin).await;
 
     assert!(nats.restart());

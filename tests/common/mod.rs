@@ -1,6 +1,9 @@
 //! Scenes with known answers, built in code, and the closed forms they are checked against.
 #![allow(dead_code)] // each test binary uses its own subset
 
+pub mod http;
+pub mod viewer;
+
 use glam::{DVec3, dvec3};
 use solver::visibility::Occluders;
 use solver::{

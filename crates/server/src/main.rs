@@ -138,10 +138,7 @@ async fn run_origin(
         }
     };
     let shared = shared_for(&prepared, limits, token.clone());
-    let listener = tokio::net::TcpListener::bind(&args.addr)
-        .await
-        .with_context(|| format!("cannot listen on {}", args.addr))?;
-    let address = listener.local_addr()?;
+    let (listener, address) = bind(&args.addr).await?;
     // A closed stdout (`radcast-server | head -1`) must not stop the server: errors ignored.
     let _ = writeln!(
         std::io::stdout(),
@@ -195,10 +192,7 @@ async fn run_edge(args: Args, process: std::sync::Arc<server::Process>) -> anyho
     }
     let nats = fanout::Nats::connect(url, "radcast edge").await?;
     let edge = fanout::edge::Edge::new(process.clone(), nats, args.name.clone());
-    let listener = tokio::net::TcpListener::bind(&args.addr)
-        .await
-        .with_context(|| format!("cannot listen on {}", args.addr))?;
-    let address = listener.local_addr()?;
+    let (listener, address) = bind(&args.addr).await?;
     let _ = writeln!(
         std::io::stdout(),
         "radcast-server: edge of NATS {url} on http://{address}\n  viewers: radcast-client view --url ws://{address}/ws --out view.png\n  scenes:  curl http://{address}/scenes"
@@ -233,6 +227,15 @@ async fn serve_until_signal(
         );
     }
     Ok(())
+}
+
+/// A listener on `addr` and the address it got (the port, when `addr` asks for any).
+async fn bind(addr: &str) -> anyhow::Result<(tokio::net::TcpListener, std::net::SocketAddr)> {
+    let listener = tokio::net::TcpListener::bind(addr)
+        .await
+        .with_context(|| format!("cannot listen on {addr}"))?;
+    let address = listener.local_addr()?;
+    Ok((listener, address))
 }
 
 /// From the shutdown signal to exit, at most.

@@ -1,0 +1,74 @@
+//! A viewer over a real WebSocket that keeps its buffer current, for end-to-end tests.
+
+use futures_util::StreamExt;
+use std::net::SocketAddr;
+use std::time::Duration;
+use tokio_tungstenite::tungstenite::Message;
+use wire::{ColourBuffer, ServerMessage};
+
+/// Generous bound on a wait for a state; a hang fails instead of blocking CI.
+const PATIENCE: Duration = Duration::from_secs(90);
+
+/// A viewer that applies every frame it gets, and notes what came as deltas and geometry changes.
+pub struct Viewer {
+    socket: tokio_tungstenite::WebSocketStream<
+        tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
+    >,
+    /// The colours held now.
+    pub buffer: ColourBuffer,
+    /// The number of changed vertices of every delta received.
+    pub deltas: Vec<usize>,
+    /// Every geometry version announced.
+    pub geometry_versions: Vec<u64>,
+}
+
+impl Viewer {
+    /// Connects to `ws://ADDRESS/ws`.
+    pub async fn connect(address: SocketAddr) -> Viewer {
+        let (socket, _) = tokio_tungstenite::connect_async(format!("ws://{address}/ws"))
+            .await
+            .unwrap();
+        Viewer {
+            socket,
+            buffer: ColourBuffer::default(),
+            deltas: Vec::new(),
+            geometry_versions: Vec::new(),
+        }
+    }
+
+    /// Reads until it holds a final frame that satisfies `done`; fails if the connection ends.
+    pub async fn wait_for(&mut self, done: impl Fn(&ColourBuffer) -> bool) {
+        tokio::time::timeout(PATIENCE, async {
+            while !(self.buffer.info.is_some_and(|i| i.is_final) && done(&self.buffer)) {
+                let bytes = match self.socket.next().await {
+                    Some(Ok(Message::Binary(bytes))) => bytes,
+                    Some(Ok(_)) => continue,
+                    other => panic!("the viewer's connection ended: {other:?}"),
+                };
+                let message = ServerMessage::decode(&bytes).unwrap();
+                if let ServerMessage::Delta(delta) = &message {
+                    self.deltas.push(delta.indices.len());
+                }
+                if let ServerMessage::GeometryChanged { geometry_version } = message {
+                    self.geometry_versions.push(geometry_version);
+                }
+                self.buffer
+                    .apply(&message)
+                    .expect("deltas apply to what the viewer holds");
+            }
+        })
+        .await
+        .expect("the expected state arrives");
+    }
+
+    /// Reads until it holds a final frame whose checksum is `checksum`.
+    pub async fn ends_with(&mut self, checksum: u32) {
+        self.wait_for(|buffer| wire::checksum(&buffer.colours) == checksum)
+            .await
+    }
+
+    /// The solution version held (0 before the first frame).
+    pub fn version(&self) -> u64 {
+        self.buffer.info.map_or(0, |i| i.solution_version)
+    }
+}
