@@ -110,6 +110,17 @@ impl Shaft {
 /// Whether face `blocker` lies strictly between the point sets `a` and `b` (convex polygons'
 /// corners) and covers every segment from one to the other: all such segments cross its plane
 /// inside the convex hull of the corner-to-corner crossings, so those crossings decide.
+/// Whether the plane of `face` (normal `normal`) leaves every point of `a` and `b` on one side
+/// (or on it): then no segment between them crosses the face, so it cannot block the pair. The
+/// faces around a receiver in a tessellated wall are such faces: coplanar with it.
+fn cannot_separate(face: &Polygon, normal: DVec3, a: &[DVec3], b: &[DVec3]) -> bool {
+    let c = face.corners()[0];
+    let tolerance = 1e-9 * face.radius();
+    let height = |p: &DVec3| (*p - c).dot(normal);
+    let mut heights = a.iter().chain(b).map(height);
+    heights.clone().all(|h| h >= -tolerance) || heights.all(|h| h <= tolerance)
+}
+
 fn blocks_every_segment(blocker: &Polygon, normal: DVec3, a: &[DVec3], b: &[DVec3]) -> bool {
     let c = blocker.corners();
     let tolerance = 1e-9 * blocker.radius();
@@ -169,13 +180,15 @@ impl Hierarchy {
             };
             // An input face (the search never goes below them).
             let face = element.patch.face;
+            let polygon = &self.faces[face as usize];
             if face == p.face
                 || face == q.face
-                || !shaft.may_meet_points(self.faces[face as usize].corners())
+                || !shaft.may_meet_points(polygon.corners())
+                || cannot_separate(polygon, element.patch.normal, cp, cq)
             {
                 continue;
             }
-            if blocks_every_segment(&self.faces[face as usize], element.patch.normal, cp, cq) {
+            if blocks_every_segment(polygon, element.patch.normal, cp, cq) {
                 return Visibility::Hidden;
             }
             // Rays decide from here; looking further for a single face that hides everything
@@ -250,5 +263,43 @@ mod tests {
             !blocks_every_segment(&level, level.normal(), &below, &above),
             "a face in the plane of one end separates nothing"
         );
+    }
+
+    #[test]
+    fn only_a_face_whose_plane_separates_the_pair_can_block_it() {
+        let square = |x: f64, z: f64, half: f64| {
+            [
+                dvec3(x - half, -half, z),
+                dvec3(x + half, -half, z),
+                dvec3(x + half, half, z),
+                dvec3(x - half, half, z),
+            ]
+        };
+        let (floor_piece, lamp) = (square(0.0, 0.0, 0.5), square(0.0, 3.0, 0.5));
+        // The floor piece's neighbour in a tessellated floor, and a wall behind both ends.
+        let [a, b, c, d] = square(1.0, 0.0, 0.5);
+        let neighbour = Polygon::quad(a, b, c, d);
+        assert!(cannot_separate(
+            &neighbour,
+            neighbour.normal(),
+            &floor_piece,
+            &lamp
+        ));
+        let wall = Polygon::quad(
+            dvec3(5.0, -1.0, 0.0),
+            dvec3(5.0, 1.0, 0.0),
+            dvec3(5.0, 1.0, 3.0),
+            dvec3(5.0, -1.0, 3.0),
+        );
+        assert!(cannot_separate(&wall, wall.normal(), &floor_piece, &lamp));
+        // A shelf between them: its plane separates, so it stays a candidate.
+        let [a, b, c, d] = square(2.0, 1.5, 1.0);
+        let shelf = Polygon::quad(a, b, c, d);
+        assert!(!cannot_separate(
+            &shelf,
+            shelf.normal(),
+            &floor_piece,
+            &lamp
+        ));
     }
 }
