@@ -104,7 +104,7 @@ async fn edge(url: &str, root: impl Into<Option<&str>>) -> EdgeServer {
         connect(url, "test edge").await,
         root.into().map(str::to_string),
     );
-    tokio::spawn(fanout::edge::follow(edge.clone()));
+    tokio::spawn(fanout::follow::follow(edge.clone()));
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let address = listener.local_addr().unwrap();
     tokio::spawn(server::listen::serve_router(

@@ -197,7 +197,7 @@ async fn run_edge(args: Args, process: std::sync::Arc<server::Process>) -> anyho
         std::io::stdout(),
         "radcast-server: edge of NATS {url} on http://{address}\n  viewers: radcast-client view --url ws://{address}/ws --out view.png\n  scenes:  curl http://{address}/scenes"
     );
-    tokio::spawn(fanout::edge::follow(edge.clone()));
+    tokio::spawn(fanout::follow::follow(edge.clone()));
     serve_until_signal(listener, fanout::edge::router(edge), &process).await
 }
 

@@ -1,42 +1,32 @@
-//! An edge: runs no solver and reads no scene file. It follows every scene published to its
-//! NATS (snapshots to start from, frames to stay current) and serves each with the same routes
-//! as an origin, byte for byte: the root serves the default scene, `/scenes/NAME/…` any.
+//! An edge: runs no solver and reads no scene file. It serves every scene it follows on NATS
+//! ([`super::follow`]) with the same routes as an origin, byte for byte: the root serves the
+//! default scene, `/scenes/NAME/…` any.
 
-use super::{
-    Nats, RECORD_SUFFIX, SceneRecord, Tag, Upstream, full_object, geometry_object, headers,
-    record_object,
-};
-use crate::hub::{GeometryState, Hub, Published};
+use super::{Nats, Upstream};
 use crate::{Process, Shared};
-use async_nats::jetstream::object_store;
 use axum::Router;
 use axum::extract::{Request, State};
 use axum::http::{StatusCode, Uri};
 use axum::response::{IntoResponse, Response};
-use futures_util::StreamExt;
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
-use std::time::Instant;
-use tokio::io::AsyncReadExt;
 use tokio::sync::watch;
 use tower::ServiceExt;
-use wire::{Geometry, ServerMessage};
 
 /// One scene as this edge serves it.
-struct Served {
-    shared: Arc<Shared>,
-    router: Router,
+pub(super) struct Served {
+    pub(super) shared: Arc<Shared>,
+    pub(super) router: Router,
 }
 
 /// Every scene this edge follows.
 pub struct Edge {
-    process: Arc<Process>,
-    nats: Nats,
-    scenes: watch::Sender<BTreeMap<String, Arc<Served>>>,
+    pub(super) process: Arc<Process>,
+    pub(super) nats: Nats,
+    pub(super) scenes: watch::Sender<BTreeMap<String, Arc<Served>>>,
     default_scene: Option<String>,
     /// Scenes whose record was seen but whose snapshot could not be read yet.
-    pending: std::sync::Mutex<std::collections::BTreeSet<String>>,
+    pub(super) pending: std::sync::Mutex<std::collections::BTreeSet<String>>,
 }
 
 impl Edge {
@@ -76,7 +66,7 @@ impl Edge {
         served[name].shared.clone()
     }
 
-    fn served(&self, name: &str) -> Option<Arc<Served>> {
+    pub(super) fn served(&self, name: &str) -> Option<Arc<Served>> {
         self.scenes.borrow().get(name).cloned()
     }
 
@@ -158,413 +148,10 @@ async fn dispatch(State(edge): State<Arc<Edge>>, mut request: Request) -> Respon
     }
 }
 
-/// A scene's newest state as its origin stored it.
-struct Snapshot {
-    tag: Tag,
-    geometry: GeometryState,
-    state: Published,
-    record: SceneRecord,
-    record_version: u64,
-}
-
-/// How long reading one snapshot object may take: a read that races the object's replacement
-/// (its chunks purged under it) would otherwise wait forever.
-const READ_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(5);
-
-async fn read_object(
-    objects: &object_store::ObjectStore,
-    name: &str,
-) -> anyhow::Result<(Tag, Vec<u8>)> {
-    let read = async {
-        let mut object = objects
-            .get(name)
-            .await
-            .map_err(|e| anyhow::anyhow!("cannot read {name}: {e}"))?;
-        let tag = Tag::from_metadata(&object.info().metadata)
-            .ok_or_else(|| anyhow::anyhow!("{name} carries no radcast tag"))?;
-        let mut bytes = Vec::with_capacity(object.info().size);
-        object.read_to_end(&mut bytes).await?;
-        Ok((tag, bytes))
-    };
-    tokio::time::timeout(READ_TIMEOUT, read)
-        .await
-        .map_err(|_| {
-            anyhow::anyhow!("reading {name} took over {READ_TIMEOUT:?} (replaced meanwhile?)")
-        })?
-}
-
-async fn read_geometry(
-    objects: &object_store::ObjectStore,
-    scene: &str,
-) -> anyhow::Result<(Tag, GeometryState)> {
-    let (tag, bytes) = read_object(objects, &geometry_object(scene)).await?;
-    let geometry = Geometry::decode(&bytes)?;
-    Ok((
-        tag.clone(),
-        GeometryState::new(tag.scene_id, tag.version, geometry),
-    ))
-}
-
-async fn read_snapshot(
-    objects: &object_store::ObjectStore,
-    scene: &str,
-) -> anyhow::Result<Snapshot> {
-    let (geometry_tag, geometry) = read_geometry(objects, scene).await?;
-    let (tag, bytes) = read_object(objects, &full_object(scene)).await?;
-    if tag.run != geometry_tag.run || tag.geometry_version != geometry_tag.version {
-        anyhow::bail!("the snapshot of '{scene}' is being replaced");
-    }
-    let ServerMessage::Full(frame) = ServerMessage::decode(&bytes)? else {
-        anyhow::bail!("{} is not a full frame", full_object(scene));
-    };
-    let state = Published::new(frame.info, frame.colours, None, tag.geometry_version);
-    let (record_tag, record) = read_object(objects, &record_object(scene)).await?;
-    let record: SceneRecord = serde_json::from_slice(&record)?;
-    if record.run != tag.run {
-        anyhow::bail!("the record of '{scene}' is being replaced");
-    }
-    Ok(Snapshot {
-        tag,
-        geometry,
-        state,
-        record,
-        record_version: record_tag.version,
-    })
-}
-
-/// Follows NATS until shutdown: scene records (new scenes, summaries, health), frames,
-/// heartbeats; reads snapshots where frames cannot be applied and after every reconnect.
-pub async fn follow(edge: Arc<Edge>) {
-    // One subscription for frames, records and heartbeats: NATS keeps one publisher's
-    // messages in order on it, so a record is taken before the frame it goes with.
-    let mut messages = match edge.nats.client.subscribe("radcast.*.*").await {
-        Ok(messages) => messages,
-        Err(error) => {
-            tracing::error!("cannot subscribe on NATS: {error}");
-            return;
-        }
-    };
-    tokio::spawn(watch_health(edge.clone()));
-    let mut connects = edge.nats.connects.clone();
-    connects.mark_unchanged();
-    let mut tick = tokio::time::interval(super::ALIVE_INTERVAL);
-    loop {
-        let objects = match edge.nats.snapshots().await {
-            Ok(objects) => Some(objects),
-            Err(error) => {
-                tracing::warn!("edge: {error:#}");
-                None
-            }
-        };
-        let watch = match &objects {
-            Some(objects) => objects.watch_with_history().await.ok(),
-            None => None,
-        };
-        let (Some(objects), Some(mut watch)) = (objects, watch) else {
-            tokio::select! {
-                _ = tick.tick() => continue,
-                _ = edge.process.shutdown.cancelled() => return,
-            }
-        };
-        loop {
-            tokio::select! {
-                change = watch.next() => match change {
-                    Some(Ok(info)) => {
-                        let tag = Tag::from_metadata(&info.metadata);
-                        if let Some(scene) = info.name.strip_suffix(RECORD_SUFFIX).filter(|_| !info.deleted) {
-                            // A known run's records come ahead of its frames; only a new scene
-                            // or a new run needs the stored one.
-                            let known = edge.scene(scene).is_some_and(|s| tag.is_some_and(|t| t.run == upstream(&s).run));
-                            if !known {
-                                edge.serve_or_retry(&objects, scene).await;
-                            }
-                        }
-                    }
-                    // The watch ends with its connection: make it again.
-                    _ => break,
-                },
-                Some(message) = messages.next() => match message.subject.rsplit('.').next() {
-                    Some("frame") => edge.take_frame(&objects, message).await,
-                    Some("record") => edge.take_record_message(&message),
-                    Some("alive") => edge.heard(&message),
-                    _ => {}
-                },
-                _ = tick.tick() => {
-                    let pending = std::mem::take(&mut *edge.pending.lock().expect("pending lock"));
-                    for scene in pending {
-                        edge.serve_or_retry(&objects, &scene).await;
-                    }
-                    edge.resync_stale(&objects).await;
-                }
-                _ = connects.changed() => {
-                    // Frames sent while disconnected are lost: read every snapshot again.
-                    for name in edge.scene_names() {
-                        if let Some(shared) = edge.scene(&name) {
-                            upstream(&shared).stale.store(true, Ordering::Relaxed);
-                        }
-                    }
-                    break;
-                }
-                _ = edge.process.shutdown.cancelled() => return,
-            }
-        }
-    }
-}
-
-/// Once a second, whatever the feed is doing: reports silent origins and a lost NATS.
-async fn watch_health(edge: Arc<Edge>) {
-    let mut tick = tokio::time::interval(super::ALIVE_INTERVAL);
-    loop {
-        tokio::select! {
-            _ = tick.tick() => edge.check_silence(),
-            _ = edge.process.shutdown.cancelled() => return,
-        }
-    }
-}
-
-/// The report, emissions and origin health of `record` (sent with solution `version`; none
-/// older than the one in use), for `/api/solution`, `/api/objects`
-/// and `/healthz`.
-fn take_record(shared: &Shared, scene: &str, record: SceneRecord, version: u64) {
-    if upstream(shared)
-        .record_version
-        .fetch_max(version, Ordering::Relaxed)
-        > version
-    {
-        return;
-    }
-    *shared.report.lock().expect("report lock") = record.report;
-    *shared.emissions.lock().expect("emissions lock") = record.emissions;
-    match record.health.as_str() {
-        "ok" => shared.health.recovered(crate::health::Fault::Origin),
-        other => shared.health.fault(
-            crate::health::Fault::Origin,
-            format!("the origin of '{scene}' reports {other}"),
-        ),
-    }
-}
-
-fn upstream(shared: &Shared) -> &Upstream {
+/// The link to its origin that every scene an edge serves has.
+pub(super) fn upstream(shared: &Shared) -> &Upstream {
     shared
         .upstream
         .as_ref()
         .expect("an edge's scenes have an upstream")
-}
-
-/// The scene a subject `radcast.SCENE.KIND` is about.
-fn scene_of(subject: &str) -> Option<&str> {
-    subject.strip_prefix("radcast.")?.split('.').next()
-}
-
-fn header(message: &async_nats::Message, name: &str) -> Option<String> {
-    Some(message.headers.as_ref()?.get(name)?.as_str().to_string())
-}
-
-impl Edge {
-    /// Serves `scene` from its snapshot, or notes it to try again a second later.
-    async fn serve_or_retry(&self, objects: &object_store::ObjectStore, scene: &str) {
-        if self.start_serving(objects, scene).await.is_none() {
-            let mut pending = self.pending.lock().expect("pending lock");
-            pending.insert(scene.to_string());
-        }
-    }
-
-    /// A record sent ahead of a frame, for a scene served now.
-    fn take_record_message(&self, message: &async_nats::Message) {
-        let Some((scene, shared)) =
-            scene_of(&message.subject).and_then(|s| Some((s, self.scene(s)?)))
-        else {
-            return;
-        };
-        let version = header(message, headers::VERSION).and_then(|v| v.parse::<u64>().ok());
-        match serde_json::from_slice::<SceneRecord>(&message.payload) {
-            Ok(record) if record.run == upstream(&shared).run => {
-                let Some(version) = version else { return };
-                take_record(&shared, scene, record, version)
-            }
-            Ok(_) => {}
-            Err(error) => tracing::warn!("edge: a record of '{scene}' is unreadable: {error}"),
-        }
-    }
-
-    /// Serves `scene` from its snapshot and record, replacing (and closing the viewers of) an
-    /// earlier run's copy.
-    async fn start_serving(
-        &self,
-        objects: &object_store::ObjectStore,
-        scene: &str,
-    ) -> Option<Arc<Shared>> {
-        let snapshot = match read_snapshot(objects, scene).await {
-            Ok(snapshot) => snapshot,
-            Err(error) => {
-                tracing::warn!("edge: cannot serve '{scene}' yet: {error:#}; trying again");
-                return None;
-            }
-        };
-        let upstream = Upstream {
-            nats: self.nats.clone(),
-            scene: scene.to_string(),
-            run: snapshot.tag.run.clone(),
-            last_heard: Instant::now().into(),
-            record_version: 0.into(),
-            stale: false.into(),
-        };
-        let hub = Hub::restore(snapshot.geometry, snapshot.state);
-        let shared = Shared::in_process(self.process.clone(), hub, String::new(), Some(upstream));
-        // Before anyone can ask: /api/solution must not answer without the report.
-        take_record(&shared, scene, snapshot.record, snapshot.record_version);
-        let served = Arc::new(Served {
-            router: crate::routes::router(shared.clone()),
-            shared: shared.clone(),
-        });
-        let mut previous = None;
-        self.scenes
-            .send_modify(|scenes| previous = scenes.insert(scene.to_string(), served));
-        match previous {
-            Some(previous) => {
-                tracing::info!("edge: the origin of '{scene}' restarted; its viewers reconnect");
-                previous.shared.retired.cancel();
-            }
-            None => tracing::info!("edge: serving scene '{scene}'"),
-        }
-        Some(shared)
-    }
-
-    /// A frame: applied when it follows what this edge holds, else the snapshot is read.
-    async fn take_frame(&self, objects: &object_store::ObjectStore, message: async_nats::Message) {
-        let Some(shared) = scene_of(&message.subject).and_then(|s| self.scene(s)) else {
-            return;
-        };
-        let link = upstream(&shared);
-        *link.last_heard.lock().expect("heard lock") = Instant::now();
-        let version = header(&message, headers::VERSION).and_then(|v| v.parse::<u64>().ok());
-        let geometry_version =
-            header(&message, headers::GEOMETRY).and_then(|v| v.parse::<u64>().ok());
-        let (Some(version), Some(geometry_version)) = (version, geometry_version) else {
-            return;
-        };
-        if header(&message, headers::RUN).as_deref() != Some(link.run.as_str()) {
-            // A restarted origin: its record brings the new run.
-            return;
-        }
-        let held = shared.hub.current();
-        if version <= held.version {
-            return;
-        }
-        if geometry_version != shared.hub.geometry().version {
-            match read_geometry(objects, &link.scene).await {
-                Ok((tag, geometry)) if tag.version == geometry_version && tag.run == link.run => {
-                    shared.hub.install_geometry(geometry)
-                }
-                // The geometry moved on again: the snapshot has the newest.
-                _ => return self.resync(objects, &link.scene, &shared, version).await,
-            }
-        }
-        let next = match ServerMessage::decode(&message.payload) {
-            Ok(ServerMessage::Full(frame)) => Some(Published::new(
-                frame.info,
-                frame.colours,
-                None,
-                geometry_version,
-            )),
-            Ok(ServerMessage::Delta(delta))
-                if delta.base_version == held.version
-                    && delta.info.vertex_count as usize == held.colours.len() =>
-            {
-                // Decoding checked every index against the vertex count.
-                let mut colours = held.colours.to_vec();
-                for (&index, &colour) in delta.indices.iter().zip(&delta.colours) {
-                    colours[index as usize] = colour;
-                }
-                Some(Published::new(
-                    delta.info,
-                    colours,
-                    Some((delta.base_version, message.payload.clone())),
-                    geometry_version,
-                ))
-            }
-            // Too big for a message, or a gap: the snapshot has it.
-            _ => None,
-        };
-        match next {
-            Some(state) if state.version == version => shared.hub.install(state),
-            _ => self.resync(objects, &link.scene, &shared, version).await,
-        }
-    }
-
-    fn heard(&self, message: &async_nats::Message) {
-        if let Some(shared) = scene_of(&message.subject).and_then(|s| self.scene(s)) {
-            *upstream(&shared).last_heard.lock().expect("heard lock") = Instant::now();
-        }
-    }
-
-    /// Reports origins not heard for [`super::SILENT_AFTER`] and a NATS connection that is down.
-    fn check_silence(&self) {
-        let connected = self.nats.is_connected();
-        for name in self.scene_names() {
-            let Some(shared) = self.scene(&name) else {
-                continue;
-            };
-            let version = shared.hub.current().version;
-            match connected {
-                true => shared.health.recovered(crate::health::Fault::Nats),
-                false => shared.health.fault(
-                    crate::health::Fault::Nats,
-                    format!("NATS is unreachable: serving the last solution of '{name}' (version {version})"),
-                ),
-            }
-            match upstream(&shared).silent_for() > super::SILENT_AFTER {
-                true => shared.health.fault(
-                    crate::health::Fault::OriginSilent,
-                    format!("the origin of '{name}' is silent: serving its last solution (version {version})"),
-                ),
-                false => shared.health.recovered(crate::health::Fault::OriginSilent),
-            }
-        }
-    }
-
-    /// Reads the snapshot of every scene marked stale (a reconnect, or a read that failed).
-    async fn resync_stale(&self, objects: &object_store::ObjectStore) {
-        for name in self.scene_names() {
-            if let Some(shared) = self.scene(&name) {
-                if upstream(&shared).stale.swap(false, Ordering::Relaxed) {
-                    self.resync(objects, &name, &shared, 0).await;
-                }
-            }
-        }
-    }
-
-    /// Serves the stored snapshot of `name` (a new run's from scratch); when it cannot be read,
-    /// or is older than version `at_least`, the scene is marked stale: read again a second later.
-    async fn resync(
-        &self,
-        objects: &object_store::ObjectStore,
-        name: &str,
-        shared: &Shared,
-        at_least: u64,
-    ) {
-        let link = upstream(shared);
-        tracing::debug!(scene = name, at_least, "reading the snapshot");
-        match read_snapshot(objects, name).await {
-            Ok(snapshot) if snapshot.tag.run != link.run => {
-                self.start_serving(objects, name).await;
-            }
-            Ok(snapshot) => {
-                if snapshot.geometry.version != shared.hub.geometry().version {
-                    shared.hub.install_geometry(snapshot.geometry);
-                }
-                if snapshot.state.version < at_least {
-                    link.stale.store(true, Ordering::Relaxed);
-                }
-                if snapshot.state.version > shared.hub.current().version {
-                    shared.hub.install(snapshot.state);
-                }
-                take_record(shared, name, snapshot.record, snapshot.record_version);
-            }
-            Err(error) => {
-                tracing::warn!("edge: cannot read the snapshot of '{name}': {error:#}");
-                link.stale.store(true, Ordering::Relaxed);
-            }
-        }
-    }
 }

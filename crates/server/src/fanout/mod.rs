@@ -6,8 +6,9 @@
 //!   version before, or the full frame when there is none — with headers naming the version,
 //!   the geometry version and the origin's run. An edge that misses one reads the snapshot.
 //! - object store `radcast-snapshots` (JetStream), objects `S.geometry` and `S.full`: the
-//!   newest geometry and full frame, written before the frame is announced, so an edge that
-//!   starts late (or missed a message) is served at once without asking the origin; and
+//!   newest geometry (stored before the frames that need it) and full frame (stored right
+//!   after its frame is announced; before it when the frame is too big for one message), so an
+//!   edge that starts late (or missed a message) is served at once without asking the origin; and
 //!   `S.record`, the [`SceneRecord`] (report, emissions, health), by which edges discover
 //!   scenes (they watch the bucket). One object store, not a key-value bucket too: async-nats
 //!   0.51 cannot create a bucket on nats-server 2.9 (it misreads the account info).
@@ -18,6 +19,7 @@
 //!   checks the token and answers as it would over HTTP.
 
 pub mod edge;
+pub mod follow;
 pub mod origin;
 
 use crate::control::{Field, Reply};

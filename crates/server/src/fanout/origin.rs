@@ -1,6 +1,6 @@
-//! The origin's side: each version the hub publishes goes to NATS once — the snapshot objects
-//! first, then the frame announcing it — whatever the number of edges; control requests that
-//! edges forward are answered as the HTTP route would.
+//! The origin's side: each version the hub publishes goes to NATS once, whatever the number of
+//! edges — the frame first (for latency), its snapshot stored right after (a new geometry
+//! before it) — and control requests that edges forward are answered as the HTTP route would.
 
 use super::{
     Nats, SceneRecord, Tag, alive_subject, control_subject, frame_subject, full_object,
