@@ -3,9 +3,10 @@
 //! and says why. Uses the NATS at 127.0.0.1:4222 (`scripts/nats.sh`); skips, saying so,
 //! when none answers there.
 
-use std::io::{BufRead, BufReader};
+mod common;
+
 use std::net::SocketAddr;
-use std::process::{Child, Command, Stdio};
+use std::process::Child;
 use std::time::{Duration, Instant};
 
 const NATS: &str = "nats://127.0.0.1:4222";
@@ -25,25 +26,9 @@ impl Drop for Server {
     }
 }
 
-/// Starts `radcast-server ARGS --addr 127.0.0.1:0` and reads its address from the banner.
+/// Starts `radcast-server ARGS`, killed when dropped.
 fn start(args: &[&str]) -> Server {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_radcast-server"))
-        .args(args)
-        .args(["--addr", "127.0.0.1:0"])
-        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("the server starts");
-    let first = BufReader::new(child.stdout.take().expect("piped"))
-        .lines()
-        .next()
-        .expect("a banner")
-        .expect("text");
-    let address = first
-        .rsplit_once("http://")
-        .and_then(|(_, a)| a.parse().ok())
-        .unwrap_or_else(|| panic!("no address in the banner: {first}"));
+    let (child, address) = common::start_server(args);
     Server { child, address }
 }
 

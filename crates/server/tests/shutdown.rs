@@ -1,9 +1,10 @@
 //! SIGTERM and Ctrl-C as `docker stop` and an operator send them: every viewer gets a close
 //! frame (1001, going away) and the process exits within seconds, even in the middle of a solve.
 
+mod common;
+
 use futures_util::StreamExt;
-use std::io::{BufRead, BufReader};
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::protocol::frame::coding::CloseCode;
@@ -17,26 +18,16 @@ const VIEWERS: usize = 200;
 /// Starts the server on a scene whose form factors take long on 2 cores, connects viewers
 /// while it solves, sends `signal`, and checks every viewer's close frame and the exit.
 async fn viewers_are_closed_and_the_server_exits_on(signal: &str) {
-    let mut server = Command::new(env!("CARGO_BIN_EXE_radcast-server"))
-        .args(["--addr", "127.0.0.1:0", "--no-cache", "--patches", "8000"])
-        .args(["--scene", "scenes/cornell-box.obj", "--token", "t"])
-        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("the server starts");
     // Only the first line is read, and stdout closed: the server must not mind.
-    let banner = BufReader::new(server.stdout.take().expect("piped"))
-        .lines()
-        .next()
-        .expect("a banner")
-        .expect("text");
-    let address = banner
-        .split("http://")
-        .nth(1)
-        .expect("the banner names the address")
-        .trim()
-        .to_string();
+    let (mut server, address) = common::start_server(&[
+        "--no-cache",
+        "--patches",
+        "8000",
+        "--scene",
+        "scenes/cornell-box.obj",
+        "--token",
+        "t",
+    ]);
     let mut viewers = Vec::new();
     for _ in 0..VIEWERS {
         let (mut socket, _) = tokio_tungstenite::connect_async(format!("ws://{address}/ws"))

@@ -4,7 +4,8 @@
 
 use super::edge::{Edge, Served, upstream};
 use super::{
-    RECORD_SUFFIX, SceneRecord, Tag, Upstream, full_object, geometry_object, headers, record_object,
+    RECORD_SUFFIX, SceneRecord, Tag, Upstream, full_object, geometry_object, header, headers,
+    record_object,
 };
 use crate::Shared;
 use crate::hub::{GeometryState, Hub, Published};
@@ -207,10 +208,6 @@ fn scene_of(subject: &str) -> Option<&str> {
     subject.strip_prefix("radcast.")?.split('.').next()
 }
 
-fn header(message: &async_nats::Message, name: &str) -> Option<String> {
-    Some(message.headers.as_ref()?.get(name)?.as_str().to_string())
-}
-
 impl Edge {
     /// Serves `scene` from its snapshot, or notes it to try again a second later.
     async fn serve_or_retry(&self, objects: &object_store::ObjectStore, scene: &str) {
@@ -227,7 +224,7 @@ impl Edge {
         else {
             return;
         };
-        let version = header(message, headers::VERSION).and_then(|v| v.parse::<u64>().ok());
+        let version = header::<u64>(message, headers::VERSION);
         match serde_json::from_slice::<SceneRecord>(&message.payload) {
             Ok(record) if record.run == upstream(&shared).run => {
                 let Some(version) = version else { return };
@@ -288,13 +285,12 @@ impl Edge {
         };
         let link = upstream(&shared);
         *link.last_heard.lock().expect("heard lock") = Instant::now();
-        let version = header(&message, headers::VERSION).and_then(|v| v.parse::<u64>().ok());
-        let geometry_version =
-            header(&message, headers::GEOMETRY).and_then(|v| v.parse::<u64>().ok());
+        let version = header::<u64>(&message, headers::VERSION);
+        let geometry_version = header::<u64>(&message, headers::GEOMETRY);
         let (Some(version), Some(geometry_version)) = (version, geometry_version) else {
             return;
         };
-        if header(&message, headers::RUN).as_deref() != Some(link.run.as_str()) {
+        if header::<String>(&message, headers::RUN).as_deref() != Some(link.run.as_str()) {
             // A restarted origin: its record brings the new run.
             return;
         }

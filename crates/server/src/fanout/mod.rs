@@ -61,6 +61,12 @@ pub mod headers {
     pub const STATUS: &str = "Radcast-Status";
 }
 
+/// Header `name` of `message`, parsed (as `String`: the text itself); `None` when it is absent
+/// or does not parse.
+pub(super) fn header<T: std::str::FromStr>(message: &async_nats::Message, name: &str) -> Option<T> {
+    message.headers.as_ref()?.get(name)?.as_str().parse().ok()
+}
+
 /// The subject a scene's frames are published on.
 pub fn frame_subject(scene: &str) -> String {
     format!("radcast.{scene}.frame")
@@ -304,12 +310,8 @@ impl Upstream {
             Ok(answer) => answer,
             Err(error) => return unreachable(error.to_string()),
         };
-        let status = answer
-            .headers
-            .as_ref()
-            .and_then(|h| h.get(headers::STATUS))
-            .and_then(|s| s.as_str().parse::<u16>().ok())
-            .and_then(|s| StatusCode::from_u16(s).ok());
+        let status =
+            header::<u16>(&answer, headers::STATUS).and_then(|s| StatusCode::from_u16(s).ok());
         match (status, serde_json::from_slice(&answer.payload)) {
             (Some(status), Ok(body)) => Reply { status, body },
             _ => unreachable("its answer was malformed".into()),

@@ -4,7 +4,7 @@
 
 use super::{
     Nats, SceneRecord, Tag, alive_subject, control_subject, frame_subject, full_object,
-    geometry_object, headers, record_object, record_subject,
+    geometry_object, header, headers, record_object, record_subject,
 };
 use crate::Shared;
 use crate::control::{Field, Reply};
@@ -193,16 +193,10 @@ async fn answer_control(shared: &Shared, nats: &Nats, scene: &str) {
             },
             _ = shared.process.shutdown.cancelled() => return,
         };
-        let Some(reply_to) = request.reply else {
+        let Some(reply_to) = request.reply.clone() else {
             continue;
         };
-        let text = |name| {
-            request
-                .headers
-                .as_ref()
-                .and_then(|h| h.get(name))
-                .map(|v| v.as_str().to_string())
-        };
+        let text = |name| header::<String>(&request, name);
         let answer = match (
             text(headers::OBJECT),
             text(headers::FIELD).as_deref().and_then(Field::from_key),
