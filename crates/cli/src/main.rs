@@ -59,11 +59,16 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Write a generated scene (OBJ + MTL beside it): a furnished room for scaling tests.
+    /// Write a generated scene (OBJ + MTL beside it) for scaling tests: a furnished room, or
+    /// with --town a town of triangle soup under a sky.
     Generate {
         /// Pieces of furniture (tables, chairs, cabinets; about 14 faces each).
-        #[arg(long, default_value_t = 1000)]
+        #[arg(long, default_value_t = 1000, conflicts_with = "town")]
         pieces: usize,
+        /// A town of about this many triangles instead: buildings, domes and trees cut into
+        /// small triangles under one large emitting sky quad.
+        #[arg(long)]
+        town: Option<usize>,
         /// Seed: the same seed gives the same room.
         #[arg(long, default_value_t = 1)]
         seed: u64,
@@ -318,13 +323,21 @@ fn main() -> anyhow::Result<()> {
                 std::process::exit(1);
             }
         }
-        Command::Generate { pieces, seed, out } => {
+        Command::Generate {
+            pieces,
+            town,
+            seed,
+            out,
+        } => {
             let mtl_path = out.with_extension("mtl");
             let mtl_name = mtl_path
                 .file_name()
                 .and_then(|n| n.to_str())
                 .context("--out needs a file name")?;
-            let scene = solver::generate::furnished_room(pieces, seed, mtl_name);
+            let scene = match town {
+                Some(triangles) => solver::generate::town(triangles, seed, mtl_name),
+                None => solver::generate::furnished_room(pieces, seed, mtl_name),
+            };
             create_parent(&out)?;
             std::fs::write(&out, &scene.obj)
                 .with_context(|| format!("{}: cannot write", out.display()))?;

@@ -1,21 +1,13 @@
-//! Generated scenes for scaling measurements: a furnished room with as many pieces of
-//! furniture as asked, as OBJ + MTL text. The generator ships instead of large files.
+//! The furnished room: a closed room of tables, chairs and cabinets under a grid of ceiling
+//! lamps, all axis-aligned quads (about 14 faces a piece).
 
+use super::{GeneratedScene, MaterialLine, Writer, materials};
 use glam::{DVec3, dvec3};
-use rand_core::{RngCore, SeedableRng};
-use rand_pcg::Pcg64Mcg;
+use rand_core::RngCore;
 use std::fmt::Write;
 
-/// A scene as the two files that describe it.
-pub struct GeneratedScene {
-    /// The OBJ text; it names its MTL file `mtl_name`.
-    pub obj: String,
-    /// The MTL text.
-    pub mtl: String,
-}
-
 /// Materials: diffuse reflectance (`Kd`) and emitted radiosity (`Ke`, W/m^2).
-const MATERIALS: [(&str, [f64; 3], [f64; 3]); 8] = [
+const MATERIALS: [MaterialLine; 8] = [
     ("plaster", [0.75, 0.73, 0.70], [0.0; 3]),
     ("floorboards", [0.45, 0.32, 0.20], [0.0; 3]),
     ("oak", [0.55, 0.40, 0.25], [0.0; 3]),
@@ -31,57 +23,12 @@ const HEIGHT: f64 = 3.0;
 /// Floor space per piece of furniture, metres along each side.
 const CELL: f64 = 1.5;
 
-struct Writer {
-    obj: String,
-    rng: Pcg64Mcg,
-}
-
-impl Writer {
-    fn unit(&mut self) -> f64 {
-        (self.rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn between(&mut self, low: f64, high: f64) -> f64 {
-        low + (high - low) * self.unit()
-    }
-
-    fn object(&mut self, name: &str, material: &str) {
-        // Writing to a String cannot fail.
-        let _ = write!(self.obj, "o {name}\nusemtl {material}\n");
-    }
-
-    /// The parallelogram `origin, origin + u, origin + u + v, origin + v`, front `u x v`.
-    fn quad(&mut self, origin: DVec3, u: DVec3, v: DVec3) {
-        for p in [origin, origin + u, origin + u + v, origin + v] {
-            let _ = writeln!(self.obj, "v {:.4} {:.4} {:.4}", p.x, p.y, p.z);
-        }
-        self.obj.push_str("f -4 -3 -2 -1\n");
-    }
-
-    /// An axis-aligned box from `lo` to `hi` with outward faces; the bottom only if it floats.
-    fn cuboid(&mut self, lo: DVec3, hi: DVec3) {
-        let size = hi - lo;
-        let (x, y, z) = (DVec3::X * size.x, DVec3::Y * size.y, DVec3::Z * size.z);
-        self.quad(lo + y, z, x);
-        self.quad(lo, z, y);
-        self.quad(lo + x, y, z);
-        self.quad(lo, y, x);
-        self.quad(lo + z, x, y);
-        if lo.y > 0.0 {
-            self.quad(lo, x, z);
-        }
-    }
-}
-
 /// A closed room with `pieces` pieces of furniture (tables, chairs, cabinets) on a grid, lit by
 /// a grid of ceiling lamps; the same `seed` gives the same room. The OBJ refers to `mtl_name`.
 pub fn furnished_room(pieces: usize, seed: u64, mtl_name: &str) -> GeneratedScene {
     let per_side = (pieces as f64).sqrt().ceil().max(1.0) as usize;
     let side = per_side as f64 * CELL + 2.0;
-    let mut w = Writer {
-        obj: String::new(),
-        rng: Pcg64Mcg::seed_from_u64(seed),
-    };
+    let mut w = Writer::new(seed);
     let _ = writeln!(
         w.obj,
         "# radcast generate --pieces {pieces} --seed {seed}: a furnished room, {side:.1} x {side:.1} x {HEIGHT} m\nmtllib {mtl_name}"
@@ -169,15 +116,10 @@ pub fn furnished_room(pieces: usize, seed: u64, mtl_name: &str) -> GeneratedScen
             }
         }
     }
-    let mut mtl = String::from("# radcast generate: materials of the furnished room\n");
-    for (name, kd, ke) in MATERIALS {
-        let _ = writeln!(
-            mtl,
-            "newmtl {name}\nKd {} {} {}\nKe {} {} {}\n",
-            kd[0], kd[1], kd[2], ke[0], ke[1], ke[2]
-        );
+    GeneratedScene {
+        obj: w.obj,
+        mtl: materials("materials of the furnished room", &MATERIALS),
     }
-    GeneratedScene { obj: w.obj, mtl }
 }
 
 #[cfg(test)]
