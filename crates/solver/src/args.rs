@@ -165,7 +165,8 @@ pub fn budget_warnings(asked: &HierarchySettings, stats: &HierarchyStats) -> Vec
     }
     if stats.link_budget_reached {
         warnings.push(format!(
-            "links stopped splitting at {} links, past --max-links {} even at --error {}; some carry more error than that",
+            "links stopped splitting at {} links, where splitting the pairs still to decide would have passed \
+             --max-links {} even at --error {}; some carry more error than that",
             stats.links, asked.max_links, stats.knob_used
         ));
     }

@@ -36,7 +36,8 @@ pub(super) struct Estimate {
 struct PartlyHidden {
     /// The factor, visibility included.
     factor: f64,
-    /// The least and the most kernel-weighted share of clear rays over the receiver's points.
+    /// The least and the most kernel-weighted share of clear rays over the receiver's points,
+    /// each moved in by its sampling noise (equal when every difference is within the noise).
     least_visible: f64,
     most_visible: f64,
     /// The kernel-weighted mean of the visible source points.
@@ -168,7 +169,8 @@ impl Refiner<'_> {
             if unoccluded == 0.0 {
                 return;
             }
-            let (mut clear, mut total, mut clear_points) = (0.0, 0.0, DVec3::ZERO);
+            let (mut clear, mut total, mut squares, mut clear_points) =
+                (0.0, 0.0, 0.0, DVec3::ZERO);
             for k in 0..rays_per_point {
                 let (s, t) = stratified_uv(k, splitmix64(seed ^ point as u64));
                 let y = q.polygon.point_at(s, t);
@@ -178,6 +180,7 @@ impl Refiner<'_> {
                     continue;
                 }
                 total += kernel;
+                squares += kernel * kernel;
                 cast += 1;
                 if self.occluders.segment_is_clear(x, y, [p.face, q.face]) {
                     clear += kernel;
@@ -187,7 +190,13 @@ impl Refiner<'_> {
             if total > 0.0 {
                 let visible = clear / total;
                 factor += weight * unoccluded * visible;
-                (least, most) = (least.min(visible), most.max(visible));
+                // Only differences beyond the share's sampling noise count as spread: its
+                // standard error as a weighted binomial estimate (Kish's effective sample size
+                // (sum w)^2 / sum w^2; zero where every ray agrees). Counted as spread, the
+                // noise split receivers under a wide source (a sky) down to the smallest
+                // elements wherever anything stood near (issue 16).
+                let noise = (visible * (1.0 - visible) * squares).sqrt() / total;
+                (least, most) = (least.min(visible + noise), most.max(visible - noise));
                 // This point's share of the transfer, spread over the source points it sees.
                 centroid_sum += clear_points * (weight * unoccluded / total);
                 centroid_weight += weight * unoccluded * visible;
@@ -201,8 +210,8 @@ impl Refiner<'_> {
         };
         PartlyHidden {
             factor,
-            least_visible: least.min(most),
-            most_visible: most,
+            least_visible: least.min(most.max(0.0)),
+            most_visible: most.max(0.0),
             centroid,
         }
     }
@@ -300,6 +309,46 @@ mod tests {
             add_parallelogram(&mut scene, "square", (dvec3(x, 0.0, z), u, v), material);
         }
         Hierarchy::cluster_tree(&scene)
+    }
+
+    /// How much the visible share of a unit square lamp 10 m above a unit square floor varies
+    /// over the floor (as [`PartlyHidden`] reports it) when a screen at `height` hides the lamp
+    /// beyond `edge` (in x), from the floor's view straight up.
+    fn visibility_spread(height: f64, edge: f64) -> f64 {
+        let mut scene = Scene::default();
+        let grey = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        let lamp = Material {
+            emission: Rgb::ONE,
+            ..grey
+        };
+        let (x, y) = (DVec3::X, DVec3::Y);
+        add_parallelogram(&mut scene, "floor", (DVec3::ZERO, x, y), grey);
+        add_parallelogram(&mut scene, "lamp", (dvec3(0.0, 0.0, 10.0), y, x), lamp);
+        add_parallelogram(
+            &mut scene,
+            "screen",
+            (dvec3(-5.0, -5.0, height), y * 10.0, x * (5.0 + edge)),
+            grey,
+        );
+        let hierarchy = Hierarchy::cluster_tree(&scene);
+        let occluders = crate::visibility::Occluders::new(&scene);
+        let sources = Default::default();
+        let refiner = Refiner::without_solution(&hierarchy, &occluders, &sources);
+        let (floor, lamp) = (hierarchy.face_node[0], hierarchy.face_node[1]);
+        let hidden = refiner.partly_hidden_factor(floor, lamp, 2, 16);
+        hidden.most_visible - hidden.least_visible
+    }
+
+    #[test]
+    fn visibility_differences_within_the_sampling_noise_are_no_spread() {
+        // Just under the lamp, the screen hides 37% of it alike from every floor point: the
+        // shares differ only by which jittered rays cross the edge, and no split can help.
+        assert!(visibility_spread(9.99, 0.37) < 0.02);
+        // Just above the floor it casts a hard shadow over 37% of it: all or nothing.
+        assert!(visibility_spread(0.01, 0.37) > 0.95);
     }
 
     #[test]

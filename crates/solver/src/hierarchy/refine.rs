@@ -33,6 +33,7 @@ enum End {
 
 /// Per node, what it sends as refinement sees it: the largest channel of its mean radiosity
 /// and the spread of that over its leaves, W/m^2.
+#[derive(Default)]
 pub(super) struct NodeRadiosity {
     mean: Vec<f64>,
     spread: Vec<f64>,
@@ -99,6 +100,29 @@ pub(super) struct Refiner<'a> {
     target: RefineTarget,
     pub(super) rays_cast: AtomicU64,
     pub(super) shaft_decided: AtomicU64,
+}
+
+impl<'a> Refiner<'a> {
+    /// A refiner of `hierarchy` that knows no solution yet (for tests of its factors).
+    #[cfg(test)]
+    pub(super) fn without_solution(
+        hierarchy: &'a Hierarchy,
+        occluders: &'a Occluders,
+        sources: &'a NodeRadiosity,
+    ) -> Self {
+        Refiner {
+            hierarchy,
+            occluders,
+            rays: FormFactorSettings::default(),
+            sources,
+            target: RefineTarget {
+                tolerance: 0.0,
+                smallest: 0.0,
+            },
+            rays_cast: AtomicU64::new(0),
+            shaft_decided: AtomicU64::new(0),
+        }
+    }
 }
 
 impl Refiner<'_> {
