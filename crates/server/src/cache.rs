@@ -263,6 +263,7 @@ mod tests {
                 object: 0,
                 reflectance: solver::Rgb::splat(reflectance),
                 emission: solver::Rgb::ZERO,
+                source: 0,
             }],
             ..Scene::default()
         };

@@ -67,12 +67,13 @@ fn locate(mesh: &Mesh, corners: &[Rgb], faces: &[Range<usize>], probe: &Probe) -
     }
 }
 
-/// Patches of each face, as index ranges ([`Mesh::build`] meshes face by face).
-fn face_ranges(mesh: &Mesh, face_count: usize) -> Vec<Range<usize>> {
+/// Patches of each face of the scene file ([`crate::scene::Face::source`]), as index ranges
+/// ([`Mesh::build`] meshes face by face, and the pieces of one source face follow each other).
+fn face_ranges(scene: &Scene, mesh: &Mesh) -> Vec<Range<usize>> {
     // `end == 0` marks a face not seen yet: a real range ends at 1 or later.
-    let mut ranges = vec![0..0; face_count];
+    let mut ranges = vec![0..0; scene.source_face_count()];
     for (i, patch) in mesh.patches.iter().enumerate() {
-        let range = &mut ranges[patch.face as usize];
+        let range = &mut ranges[scene.faces[patch.face as usize].source as usize];
         if range.end == 0 {
             *range = i..i + 1;
         } else {
@@ -114,15 +115,15 @@ pub fn evaluate(
     corners: &[Rgb],
     probes: &[Probe],
 ) -> SolutionError {
-    let faces = face_ranges(mesh, scene.faces.len());
+    let faces = face_ranges(scene, mesh);
+    // The pieces of a source face share its material: any of them tells whether it emits.
+    let mut source_emits = vec![None; faces.len()];
+    for face in &scene.faces {
+        source_emits[face.source as usize] = Some(face.emission != Rgb::ZERO);
+    }
     let counted: Vec<&Probe> = probes
         .iter()
-        .filter(|p| {
-            scene
-                .faces
-                .get(p.face as usize)
-                .is_some_and(|f| f.emission == Rgb::ZERO)
-        })
+        .filter(|p| source_emits.get(p.face as usize) == Some(&Some(false)))
         .collect();
     let (mut flat, mut smooth) = (Vec::new(), Vec::new());
     for probe in &counted {

@@ -6,6 +6,7 @@
 pub mod accuracy;
 #[cfg(feature = "clap")]
 pub mod args;
+mod contact;
 pub mod form_factors;
 pub mod gather;
 pub mod generate;

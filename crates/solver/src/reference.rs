@@ -23,7 +23,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 pub struct Probe {
     /// Position, scene units.
     pub position: [f64; 3],
-    /// Index of the scene face it lies on.
+    /// The scene file's face it lies on ([`crate::scene::Face::source`]: faces as loaded,
+    /// before contact lines cut them).
     pub face: u32,
     /// The face's object name.
     pub object: String,
@@ -219,7 +220,7 @@ pub fn trace_probes(
             });
             Probe {
                 position: position.to_array(),
-                face,
+                face: scene.faces[face as usize].source,
                 object: scene.objects[scene.faces[face as usize].object as usize]
                     .name
                     .clone(),

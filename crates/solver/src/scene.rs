@@ -93,6 +93,10 @@ pub struct Face {
     pub reflectance: Rgb,
     /// Emitted radiosity per channel, W/m^2, finite and >= 0.
     pub emission: Rgb,
+    /// The face of the scene file this is (a piece of): its index among the loaded faces
+    /// before contact lines cut them ([`crate::contact`]). Reference probes name these, so a
+    /// reference holds however the faces are cut.
+    pub source: u32,
 }
 
 /// A suggested viewpoint, from a `#@view eye X Y Z target X Y Z up X Y Z fov DEGREES` line.
@@ -170,6 +174,10 @@ pub struct Scene {
     pub faces: Vec<Face>,
     /// Faces dropped because their area was zero (relative to the scene's size).
     pub skipped_degenerate_faces: usize,
+    /// Faces cut into pieces along contact lines ([`Scene::split_at_contacts`]).
+    pub faces_cut_at_contacts: usize,
+    /// [`Scene::triangle_count`] before contact lines cut faces.
+    triangles_before_cuts: usize,
 }
 
 /// A material's physical values.
@@ -238,26 +246,17 @@ impl Scene {
     }
 
     /// Adds a polygon given by its corners (counter-clockwise seen from the front) to `object`.
-    /// Planar convex quads stay quads; other polygons are split into a triangle fan.
+    /// Planar convex quads stay quads; other polygons are split into a triangle fan. Each face
+    /// is its own source.
     pub fn add_polygon(&mut self, object: u32, corners: &[DVec3], material: Material) {
-        let face = |polygon| Face {
-            polygon,
-            object,
-            reflectance: material.reflectance,
-            emission: material.emission,
-        };
-        if let [a, b, c, d] = *corners
-            && Polygon::is_planar_convex_quad(a, b, c, d)
-        {
-            self.faces.push(face(Polygon::quad(a, b, c, d)));
-            return;
-        }
-        for k in 1..corners.len().saturating_sub(1) {
-            self.faces.push(face(Polygon::triangle(
-                corners[0],
-                corners[k],
-                corners[k + 1],
-            )));
+        for polygon in crate::contact::convex_polygons(corners) {
+            self.faces.push(Face {
+                polygon,
+                object,
+                reflectance: material.reflectance,
+                emission: material.emission,
+                source: self.faces.len() as u32,
+            });
         }
     }
 
@@ -291,12 +290,17 @@ impl Scene {
         lost_light
     }
 
-    /// Number of triangles the faces make (a quad counts two).
+    /// Number of triangles the faces make as the scene file gave them: a quad counts two, and
+    /// faces cut along contact lines count as they were before the cut.
     pub fn triangle_count(&self) -> usize {
-        self.faces
-            .iter()
-            .map(|f| if f.polygon.is_quad() { 2 } else { 1 })
-            .sum()
+        match self.faces_cut_at_contacts {
+            0 => self
+                .faces
+                .iter()
+                .map(|f| if f.polygon.is_quad() { 2 } else { 1 })
+                .sum(),
+            _ => self.triangles_before_cuts,
+        }
     }
 
     /// True when some face emits light.
@@ -467,7 +471,8 @@ impl Scene {
     }
 
     /// What every loader ends with: degenerate faces dropped (an emitter among them is an
-    /// error), and a scene left with nothing to light refused.
+    /// error), a scene left with nothing to light refused, and faces cut along the contact
+    /// lines of what stands on them ([`Scene::split_at_contacts`]).
     pub(crate) fn finish(mut self, path: &Path) -> Result<Scene, SceneError> {
         if let Some(object) = self.drop_degenerate_faces() {
             return Err(SceneError::EmitterTooSmall {
@@ -478,7 +483,29 @@ impl Scene {
         if self.faces.is_empty() {
             return Err(SceneError::Empty { path: path.into() });
         }
+        self.split_at_contacts();
         Ok(self)
+    }
+
+    /// Cuts every face along the contact lines of the faces standing on it
+    /// ([`crate::contact`]); each face's [`Face::source`] becomes its index before the cut.
+    pub fn split_at_contacts(&mut self) {
+        for (index, face) in self.faces.iter_mut().enumerate() {
+            face.source = index as u32;
+        }
+        let triangles = self.triangle_count();
+        let (faces, cut) = crate::contact::split_at_contacts(std::mem::take(&mut self.faces));
+        (self.faces, self.faces_cut_at_contacts) = (faces, cut);
+        self.triangles_before_cuts = triangles;
+    }
+
+    /// The number of faces as the scene file gave them (before contact lines cut them).
+    pub fn source_face_count(&self) -> usize {
+        self.faces
+            .iter()
+            .map(|f| f.source as usize + 1)
+            .max()
+            .unwrap_or(0)
     }
 }
 

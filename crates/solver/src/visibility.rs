@@ -6,7 +6,7 @@
 //! origin keeps its precision and one of any size meets the same arithmetic.
 
 use crate::mesh::Patch;
-use crate::sampling::{cosine_direction, splitmix64, stratified_uv};
+use crate::sampling::{cosine_direction, splitmix64, stratified_4d, stratified_uv};
 use crate::scene::Scene;
 use glam::{DVec3, Vec3A};
 use obvhs::bvh2::{Bvh2, builder::build_bvh2};
@@ -239,8 +239,7 @@ impl Occluders {
         let seed = splitmix64(index as u64 ^ 0xC105_ED00);
         let mut buried = 0;
         for k in 0..CLOSURE_RAYS {
-            let (u, v) = stratified_uv(k, seed);
-            let (s, t) = stratified_uv(k, splitmix64(seed));
+            let [u, v, s, t] = stratified_4d(k, seed);
             let origin = p.polygon.point_at(u, v);
             let seen = self
                 .closest_hit(origin, cosine_direction(p.normal, s, t), p.face)

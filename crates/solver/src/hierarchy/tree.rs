@@ -399,8 +399,28 @@ impl Hierarchy {
 /// are cast by the scene's typical faces, not sized like the face itself. Relative to the face
 /// alone, the 17 m floor of the furnished room stopped at 2.4 m elements at knob 0.2 and its
 /// probes ran 37% RMS off (dense at 10,000 patches: 21%); capped, 17% (docs/BENCHMARKS.md).
+///
+/// Faces count as the scene file gave them: the pieces contact lines cut a floor into are one
+/// face here, or a furnished room's cut floor would make every face's scale that of its pieces.
 fn smallest_scale(scene: &Scene) -> f64 {
-    let mut radii: Vec<f64> = scene.faces.iter().map(|f| f.polygon.radius()).collect();
+    // The pieces of one source face follow each other.
+    let mut radii: Vec<f64> = scene
+        .faces
+        .chunk_by(|a, b| a.source == b.source)
+        .map(|pieces| {
+            let area: f64 = pieces.iter().map(|f| f.polygon.area()).sum();
+            let centre = pieces
+                .iter()
+                .map(|f| f.polygon.centroid() * f.polygon.area())
+                .sum::<DVec3>()
+                / area;
+            pieces
+                .iter()
+                .flat_map(|f| f.polygon.corners())
+                .map(|c| c.distance(centre))
+                .fold(0.0, f64::max)
+        })
+        .collect();
     if radii.is_empty() {
         return 0.0;
     }

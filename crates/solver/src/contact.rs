@@ -1,0 +1,414 @@
+//! Contact lines: where one face stands on another (a box on a floor, a wall on the ground),
+//! the face under it is cut along the line they share, so that no element, and no smoothly
+//! shaded patch, straddles it. Light falls on one side of such a line and none on the other;
+//! straddled, the lit side was interpolated toward the dark one, and within 4 mm of the
+//! Cornell blocks lay 70% of the box's squared error (docs/BENCHMARKS.md). This is the first
+//! step of discontinuity meshing (Heckbert 1992, "Discontinuity Meshing for Radiosity";
+//! Lischinski, Tampieri, Greenberg 1992): the contact discontinuities, known from the geometry
+//! alone, before any light.
+//!
+//! Around its contact segments a face is quartered until the segments are as long as the
+//! quarters, and each quarter is cut by the whole lines of the segments crossing it, so every
+//! piece stays convex and the cuts stay near the contacts. The pieces keep the face's
+//! material, object and orientation and name it as their source ([`Face::source`]).
+
+use crate::geometry::{Polygon, bounds};
+use crate::scene::Face;
+use glam::DVec3;
+use std::collections::HashMap;
+
+/// Distances below this fraction of a face's radius count as zero: an edge this close to a
+/// plane lies in it, and a cut leaving a piece thinner than this is not made.
+const RELATIVE_TOLERANCE: f64 = 1e-6;
+
+/// Most grid cells along the scene's longest side: bounds the grid whatever the face sizes.
+const MAX_CELLS_PER_SIDE: f64 = 1024.0;
+
+/// `faces` with every face cut along the contact segments of the faces that stand on it, and
+/// how many faces were cut. Pieces of one face follow one another, in the face's place.
+pub(crate) fn split_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
+    let grid = EdgeGrid::new(&faces);
+    let mut split = Vec::with_capacity(faces.len());
+    let mut cut = 0;
+    for (index, face) in faces.iter().enumerate() {
+        let segments = contact_segments(&faces, index, &grid);
+        let pieces = cut_locally(
+            face.polygon.corners().to_vec(),
+            face.polygon.normal(),
+            &segments,
+            0,
+        );
+        if pieces.len() > 1 {
+            cut += 1;
+        }
+        for piece in pieces {
+            for polygon in convex_polygons(&piece) {
+                split.push(Face {
+                    polygon,
+                    ..face.clone()
+                });
+            }
+        }
+    }
+    (split, cut)
+}
+
+/// Every face's edges, by the grid cells their bounding boxes cover.
+struct EdgeGrid {
+    origin: DVec3,
+    cell: f64,
+    cells: HashMap<[i64; 3], Vec<(u32, u8)>>,
+}
+
+impl EdgeGrid {
+    fn new(faces: &[Face]) -> EdgeGrid {
+        let (lo, hi) = bounds(
+            faces
+                .iter()
+                .flat_map(|f| f.polygon.corners().iter().copied()),
+        );
+        let side = (hi - lo).max_element().max(f64::MIN_POSITIVE);
+        let mean_area = faces.iter().map(|f| f.polygon.area()).sum::<f64>() / faces.len() as f64;
+        let mut grid = EdgeGrid {
+            origin: lo,
+            cell: mean_area.sqrt().max(side / MAX_CELLS_PER_SIDE),
+            cells: HashMap::new(),
+        };
+        for (f, face) in faces.iter().enumerate() {
+            let corners = face.polygon.corners();
+            for k in 0..corners.len() {
+                let (p, q) = (corners[k], corners[(k + 1) % corners.len()]);
+                let keys: Vec<[i64; 3]> = grid.keys(p.min(q), p.max(q)).collect();
+                for key in keys {
+                    grid.cells.entry(key).or_default().push((f as u32, k as u8));
+                }
+            }
+        }
+        grid
+    }
+
+    /// The cells a box from `lo` to `hi` covers.
+    fn keys(&self, lo: DVec3, hi: DVec3) -> impl Iterator<Item = [i64; 3]> {
+        let at = |p: DVec3| ((p - self.origin) / self.cell).floor().as_i64vec3();
+        let (a, b) = (at(lo), at(hi));
+        (a.x..=b.x)
+            .flat_map(move |x| (a.y..=b.y).flat_map(move |y| (a.z..=b.z).map(move |z| [x, y, z])))
+    }
+
+    /// The edges near the box from `lo` to `hi`, each once.
+    fn edges_near(&self, lo: DVec3, hi: DVec3) -> Vec<(u32, u8)> {
+        let mut edges: Vec<(u32, u8)> = self
+            .keys(lo, hi)
+            .filter_map(|key| self.cells.get(&key))
+            .flatten()
+            .copied()
+            .collect();
+        edges.sort_unstable();
+        edges.dedup();
+        edges
+    }
+}
+
+/// A segment in a face's plane from `point` to `point + direction`; as a cut, its whole line.
+#[derive(Clone, Copy, Debug)]
+struct Line {
+    point: DVec3,
+    direction: DVec3,
+}
+
+/// Deepest quartering of a face around its contact segments ([`cut_locally`]).
+const MAX_CELL_DEPTH: u32 = 16;
+
+/// The contact segments on face `index`: edges of faces that stand in front of it, not in its
+/// plane, lying in its plane and crossing its interior.
+fn contact_segments(faces: &[Face], index: usize, grid: &EdgeGrid) -> Vec<Line> {
+    let face = &faces[index].polygon;
+    let (normal, corners) = (face.normal(), face.corners());
+    let tolerance = RELATIVE_TOLERANCE * face.radius();
+    let height = |p: DVec3| (p - corners[0]).dot(normal);
+    let (lo, hi) = bounds(corners.iter().copied());
+    let margin = DVec3::splat(tolerance);
+    let mut lines = Vec::new();
+    for (other, k) in grid.edges_near(lo - margin, hi + margin) {
+        let standing = &faces[other as usize].polygon;
+        if other as usize == index || standing.normal().dot(normal).abs() > 1.0 - 1e-9 {
+            continue;
+        }
+        let c = standing.corners();
+        let (p, q) = (c[k as usize], c[(k as usize + 1) % c.len()]);
+        let in_plane = height(p).abs() <= tolerance && height(q).abs() <= tolerance;
+        let in_front = c.iter().any(|v| height(*v) > tolerance);
+        if in_plane && in_front && crosses_interior(corners, normal, p, q, tolerance) {
+            lines.push(Line {
+                point: p,
+                direction: q - p,
+            });
+        }
+    }
+    lines
+}
+
+/// Whether the segment `p`..`q` (in the plane of the convex polygon `corners`, normal
+/// `normal`) runs through the polygon's interior for longer than `tolerance`, and its line
+/// leaves corners on both sides (a segment along an edge cuts nothing).
+fn crosses_interior(corners: &[DVec3], normal: DVec3, p: DVec3, q: DVec3, tolerance: f64) -> bool {
+    let line = Line {
+        point: p,
+        direction: q - p,
+    };
+    let sides: Vec<f64> = corners.iter().map(|c| side(line, normal, *c)).collect();
+    if !(sides.iter().any(|s| *s > tolerance) && sides.iter().any(|s| *s < -tolerance)) {
+        return false;
+    }
+    // Cyrus-Beck: the part of the segment inside every edge's half-plane.
+    let (mut enter, mut leave) = (0.0f64, 1.0f64);
+    for k in 0..corners.len() {
+        let (a, b) = (corners[k], corners[(k + 1) % corners.len()]);
+        let inward = normal.cross(b - a);
+        let (start, rate) = ((p - a).dot(inward), (q - p).dot(inward));
+        if rate == 0.0 {
+            if start < 0.0 {
+                return false;
+            }
+        } else if rate > 0.0 {
+            enter = enter.max(-start / rate);
+        } else {
+            leave = leave.min(-start / rate);
+        }
+    }
+    (leave - enter) * (q - p).length() > tolerance
+}
+
+/// The convex `cell` (of a face with normal `normal`) cut along `segments` locally: quartered
+/// while segments cross it and it is more than twice as wide as the longest of them, then cut
+/// by the whole lines of those that cross each quarter. A box's footprint so cuts the floor
+/// around it only; lines across the whole floor, one per edge of each piece of furniture,
+/// cut a furnished room's floor into slivers by the thousand.
+fn cut_locally(cell: Vec<DVec3>, normal: DVec3, segments: &[Line], depth: u32) -> Vec<Vec<DVec3>> {
+    let centre = cell.iter().sum::<DVec3>() / cell.len() as f64;
+    let radius = cell.iter().map(|c| c.distance(centre)).fold(0.0, f64::max);
+    let tolerance = RELATIVE_TOLERANCE * radius;
+    let crossing: Vec<Line> = segments
+        .iter()
+        .copied()
+        .filter(|s| crosses_interior(&cell, normal, s.point, s.point + s.direction, tolerance))
+        .collect();
+    let longest = crossing
+        .iter()
+        .map(|s| s.direction.length())
+        .fold(0.0, f64::max);
+    if crossing.is_empty() || depth == MAX_CELL_DEPTH || radius <= 2.0 * longest {
+        return cut_along(&cell, normal, &crossing);
+    }
+    quarters(&cell)
+        .into_iter()
+        .flat_map(|quarter| cut_locally(quarter, normal, &crossing, depth + 1))
+        .collect()
+}
+
+/// A triangle or quad in four: by its edges' midpoints (and a quad's centre).
+fn quarters(cell: &[DVec3]) -> Vec<Vec<DVec3>> {
+    let mid = |a: DVec3, b: DVec3| (a + b) / 2.0;
+    match *cell {
+        [a, b, c] => {
+            let (ab, bc, ca) = (mid(a, b), mid(b, c), mid(c, a));
+            vec![
+                vec![a, ab, ca],
+                vec![ab, b, bc],
+                vec![ca, bc, c],
+                vec![ab, bc, ca],
+            ]
+        }
+        [a, b, c, d] => {
+            let (ab, bc, cd, da) = (mid(a, b), mid(b, c), mid(c, d), mid(d, a));
+            let centre = (a + b + c + d) / 4.0;
+            vec![
+                vec![a, ab, centre, da],
+                vec![ab, b, bc, centre],
+                vec![centre, bc, c, cd],
+                vec![da, centre, cd, d],
+            ]
+        }
+        _ => vec![cell.to_vec()],
+    }
+}
+
+/// Signed distance of `x` from `line`, in the plane of normal `normal` (positive on the left
+/// of its direction seen from the front).
+fn side(line: Line, normal: DVec3, x: DVec3) -> f64 {
+    line.direction.cross(x - line.point).dot(normal) / line.direction.length()
+}
+
+/// The convex polygon `corners` cut by each of `lines` that crosses it: convex pieces, their
+/// corners in the polygon's order. A cut that would leave a piece thinner than the tolerance is
+/// not made.
+fn cut_along(corners: &[DVec3], normal: DVec3, lines: &[Line]) -> Vec<Vec<DVec3>> {
+    let radius = Polygon::triangle(corners[0], corners[1], corners[2]).radius();
+    let tolerance = RELATIVE_TOLERANCE * radius.max(f64::MIN_POSITIVE);
+    let mut pieces = vec![corners.to_vec()];
+    for &line in lines {
+        pieces = pieces
+            .into_iter()
+            .flat_map(|piece| {
+                let sides: Vec<f64> = piece.iter().map(|c| side(line, normal, *c)).collect();
+                let crosses =
+                    sides.iter().any(|s| *s > tolerance) && sides.iter().any(|s| *s < -tolerance);
+                if crosses {
+                    vec![clip(&piece, &sides, 1.0), clip(&piece, &sides, -1.0)]
+                } else {
+                    vec![piece]
+                }
+            })
+            .collect();
+    }
+    pieces
+}
+
+/// The part of `piece` where `sign * side >= 0` (Sutherland-Hodgman against one line), with
+/// `sides` its corners' signed distances.
+fn clip(piece: &[DVec3], sides: &[f64], sign: f64) -> Vec<DVec3> {
+    let mut kept = Vec::with_capacity(piece.len() + 1);
+    for k in 0..piece.len() {
+        let next = (k + 1) % piece.len();
+        let (a, b) = (sign * sides[k], sign * sides[next]);
+        if a >= 0.0 {
+            kept.push(piece[k]);
+        }
+        if (a > 0.0 && b < 0.0) || (a < 0.0 && b > 0.0) {
+            kept.push(piece[k] + (piece[next] - piece[k]) * (a / (a - b)));
+        }
+    }
+    kept
+}
+
+/// A convex polygon as faces: a planar convex quad stays one, anything else becomes a fan of
+/// triangles.
+pub(crate) fn convex_polygons(corners: &[DVec3]) -> Vec<Polygon> {
+    if let [a, b, c, d] = *corners
+        && Polygon::is_planar_convex_quad(a, b, c, d)
+    {
+        return vec![Polygon::quad(a, b, c, d)];
+    }
+    (1..corners.len().saturating_sub(1))
+        .map(|k| Polygon::triangle(corners[0], corners[k], corners[k + 1]))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Material, Rgb, Scene};
+    use glam::dvec3;
+
+    /// A 10 x 10 floor (face 0, facing +y) with a unit box standing on it from (2, 0, 3),
+    /// four sides and a top, no bottom.
+    fn box_on_a_floor() -> Scene {
+        let mut scene = Scene::default();
+        let grey = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        let floor = scene.add_object("floor");
+        let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
+        let quad = |o: DVec3, u: DVec3, v: DVec3| [o, o + u, o + u + v, o + v];
+        scene.add_polygon(floor, &quad(DVec3::ZERO, z * 10.0, x * 10.0), grey);
+        let cube = scene.add_object("box");
+        let lo = dvec3(2.0, 0.0, 3.0);
+        for (o, u, v) in [
+            (lo + y, z, x),
+            (lo, z, y),
+            (lo + x, y, z),
+            (lo, y, x),
+            (lo + z, x, y),
+        ] {
+            scene.add_polygon(cube, &quad(o, u, v), grey);
+        }
+        scene
+    }
+
+    #[test]
+    fn a_floor_is_cut_along_the_footprint_of_a_box_standing_on_it() {
+        let scene = box_on_a_floor();
+        let floor = scene.faces[0].clone();
+        let (faces, cut) = split_at_contacts(scene.faces.clone());
+        assert_eq!(cut, 1, "only the floor is cut");
+        let pieces: Vec<&Face> = faces.iter().filter(|f| f.object == floor.object).collect();
+        // Cut near the box only: the floor's quarters that no contact crosses stay whole.
+        assert!(pieces.len() > 9 && pieces.len() < 40, "{}", pieces.len());
+        for piece in pieces.iter().filter(|f| f.polygon.centroid().x > 5.0) {
+            assert_eq!(piece.polygon.area(), 25.0);
+        }
+        let area: f64 = pieces.iter().map(|f| f.polygon.area()).sum();
+        assert!((area / floor.polygon.area() - 1.0).abs() < 1e-12, "{area}");
+        for piece in &pieces {
+            assert_eq!(piece.polygon.normal(), floor.polygon.normal());
+            assert_eq!(
+                (piece.reflectance, piece.emission),
+                (floor.reflectance, floor.emission)
+            );
+            // No piece straddles the footprint: each lies wholly inside it or outside.
+            let strictly_inside = |p: &DVec3| 2.0 < p.x && p.x < 3.0 && 3.0 < p.z && p.z < 4.0;
+            let within = |p: &DVec3| (2.0..=3.0).contains(&p.x) && (3.0..=4.0).contains(&p.z);
+            let c = piece.polygon.corners();
+            if strictly_inside(&piece.polygon.centroid()) {
+                assert!(c.iter().all(within), "{c:?}");
+            } else {
+                assert!(!c.iter().any(strictly_inside), "{c:?}");
+            }
+            assert_eq!(piece.source, 0);
+        }
+        let under: f64 = pieces
+            .iter()
+            .filter(|f| {
+                let m = f.polygon.centroid();
+                (2.0..3.0).contains(&m.x) && (3.0..4.0).contains(&m.z)
+            })
+            .map(|f| f.polygon.area())
+            .sum();
+        assert!(
+            (under - 1.0).abs() < 1e-12,
+            "the footprint is one piece: {under}"
+        );
+        // The box's own faces are left whole: they stand on nothing.
+        assert_eq!(faces.len(), pieces.len() + 5);
+    }
+
+    #[test]
+    fn faces_meeting_along_an_edge_cut_nothing() {
+        // The closed cube of the hierarchy tests: every wall meets its neighbours at their
+        // edges, and coplanar tiles of a tessellated floor meet likewise.
+        let cube = crate::hierarchy::fixtures::closed_cube();
+        let (faces, cut) = split_at_contacts(cube.faces.clone());
+        assert_eq!((cut, faces.len()), (0, cube.faces.len()));
+        let mut tiles = Scene::default();
+        let floor = tiles.add_object("floor");
+        let grey = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        for i in 0..3 {
+            let o = dvec3(i as f64, 0.0, 0.0);
+            tiles.add_polygon(
+                floor,
+                &[o, o + DVec3::Z, o + DVec3::Z + DVec3::X, o + DVec3::X],
+                grey,
+            );
+        }
+        assert_eq!(split_at_contacts(tiles.faces.clone()).1, 0);
+    }
+
+    #[test]
+    fn a_line_near_a_corner_leaves_no_sliver() {
+        let square = [DVec3::ZERO, DVec3::Z, DVec3::Z + DVec3::X, DVec3::X];
+        let near_edge = Line {
+            point: dvec3(1e-9, 0.0, 0.0),
+            direction: DVec3::Z,
+        };
+        assert_eq!(cut_along(&square, DVec3::Y, &[near_edge]).len(), 1);
+        let middle = Line {
+            point: dvec3(0.5, 0.0, 0.0),
+            direction: DVec3::Z,
+        };
+        assert_eq!(cut_along(&square, DVec3::Y, &[middle]).len(), 2);
+    }
+}
