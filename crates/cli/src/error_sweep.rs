@@ -226,14 +226,16 @@ impl Peers {
             .with_context(|| format!("{}: not a peers file (scene, source, rows)", path.display()))
     }
 
-    /// The peer's rows, and radcast's hierarchical seconds at each row's smooth and flat RMS
-    /// (log-log between the two hierarchical rows that bracket it; ~ beyond them).
+    /// The peer's rows, and radcast's seconds at each row's smooth and flat RMS: log-log
+    /// between the two rows of radcast's front (whichever method) that bracket it, as a user
+    /// who wants that error would choose.
     fn comparison(&self, rows: &[Row]) -> anyhow::Result<String> {
         let mut ours: Vec<&Row> = rows
             .iter()
-            .filter(|r| r.scene == self.scene && r.method.starts_with("hierarchical") && r.pareto)
+            .filter(|r| r.scene == self.scene && r.pareto)
             .collect();
-        ours.sort_by_key(|r| r.patches);
+        // Along the front, error falls as time grows.
+        ours.sort_by(|a, b| a.seconds[3].total_cmp(&b.seconds[3]));
         let mut out = String::new();
         writeln!(
             out,
@@ -244,7 +246,7 @@ impl Peers {
         writeln!(out, "Peer rows: {}.\n", self.source)?;
         writeln!(
             out,
-            "radcast's hierarchical seconds at the peer's error, interpolated log-log between the hierarchical rows of the front above that bracket it; a ratio above 1 means radcast is faster.\n"
+            "radcast's seconds at the peer's error, interpolated log-log between the rows of the front above (★, whichever method) that bracket it; a ratio above 1 means radcast is faster.\n"
         )?;
         writeln!(
             out,
@@ -405,7 +407,7 @@ fn seconds_at(rows: &[&Row], target: f64, reading: fn(&Row) -> f64) -> Option<(f
     interpolate_at(rows, target, reading, |r| r.seconds[3])
 }
 
-/// `value` of `rows` (sorted by patches, error falling) where `reading` is `target`: log-log
+/// `value` of `rows` (sorted so that error falls) where `reading` is `target`: log-log
 /// interpolation between the bracketing rows, or extrapolation from the nearest two; and
 /// whether it was extrapolated.
 fn interpolate_at(

@@ -176,8 +176,8 @@ pub struct Scene {
     pub skipped_degenerate_faces: usize,
     /// Faces cut into pieces along contact lines ([`Scene::split_at_contacts`]).
     pub faces_cut_at_contacts: usize,
-    /// [`Scene::triangle_count`] before contact lines cut faces.
-    triangles_before_cuts: usize,
+    /// [`Scene::triangle_count`] before contact lines cut faces (what it reports once any is).
+    pub triangles_before_cuts: usize,
 }
 
 /// A material's physical values.
