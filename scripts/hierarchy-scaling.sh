@@ -1,20 +1,39 @@
 #!/bin/sh
-# Links against leaves as the scene grows: generated furnished rooms, hierarchical radiosity at
-# one error knob. Prints a Markdown table (docs/BENCHMARKS.md). Usage: scripts/hierarchy-scaling.sh [ERROR] [PIECES...]
+# Cost against scene size for one family of generated scenes: hierarchical radiosity at the
+# default settings (or at --error E), each solve measured against a path-traced reference of
+# its own scene. Prints a Markdown table (docs/BENCHMARKS.md).
+# Usage: scripts/hierarchy-scaling.sh room|town [--error E] SIZE...
+#   room: SIZE pieces of furniture (radcast generate --pieces); town: about SIZE triangles of
+#   soup under a sky (radcast generate --town).
 set -eu
 cd "$(dirname "$0")/.."
-error=${1:-0.3}
-[ $# -gt 0 ] && shift
-pieces=${*:-"30 100 300 1000"}
+family=$1
+shift
+knob=""
+if [ "${1:-}" = "--error" ]; then
+    knob="--error $2"
+    shift 2
+fi
+case $family in
+    room) flag=--pieces ;;
+    town) flag=--town ;;
+    *) echo "usage: $0 room|town [--error E] SIZE..." >&2; exit 2 ;;
+esac
 cargo build --quiet --release -p radcast-cli
-echo "| pieces | faces | leaves | links | links/leaf | seconds | peak MB |"
-echo "|---:|---:|---:|---:|---:|---:|---:|"
-for n in $pieces; do
-    scene=scenes/generated/room-$n.obj
-    [ -f "$scene" ] || ./target/release/radcast generate --pieces "$n" --out "$scene" 2>/dev/null
-    faces=$(grep -c '^f ' "$scene")
-    ./target/release/radcast solve "$scene" --method hierarchical --error "$error" --json 2>/dev/null | python3 -c "
+radcast=./target/release/radcast
+echo "| $family | triangles | knob used | leaves | links | links/leaf | shadow rays | refine s | solve s | total s | peak MB | smooth RMS | flat RMS | energy |"
+echo "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+for n in "$@"; do
+    scene=scenes/generated/$family-$n.obj
+    reference=scenes/generated/$family-$n.reference.json
+    [ -f "$scene" ] || $radcast generate $flag "$n" --out "$scene" 2>/dev/null
+    [ -f "$reference" ] || $radcast reference "$scene" --probes 1000 --samples 16384 --out "$reference" 2>/dev/null
+    # shellcheck disable=SC2086 # $knob is empty or two words.
+    $radcast solve "$scene" --method hierarchical $knob --reference "$reference" --json 2>/dev/null | python3 -c "
 import json, sys
 d = json.load(sys.stdin)
-print(f\"| $n | $faces | {d['elements']} | {d['links']} | {d['links'] / d['elements']:.1f} | {d['seconds']['total']:.2f} | {d['peak_memory_bytes'] / 1e6:.0f} |\")"
+s, e = d['seconds'], d['error']
+print(f\"| $n | {d['triangles']:,} | {d['knob_used']} | {d['elements']:,} | {d['links']:,} | {d['links'] / d['elements']:.1f} | {d['rays'] / 1e6:.1f}M \"
+      f\"| {s['form_factors']:.1f} | {s['solve']:.2f} | {s['total']:.1f} | {d['peak_memory_bytes'] / 1e6:.0f} \"
+      f\"| {100 * e['smooth']['rms']:.2f}% | {100 * e['flat']['rms']:.2f}% | {100 * e['smooth']['energy']:+.2f}% |\")"
 done

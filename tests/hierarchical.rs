@@ -254,3 +254,42 @@ fn a_method_that_needs_single_rows_is_refused_with_the_reason() {
         "gauss-seidel updates one patch at a time and needs single form-factor rows; this transport only offers whole products (use jacobi or gmres)"
     );
 }
+
+#[test]
+fn links_grow_in_proportion_to_faces_not_to_their_square() {
+    // The generated town (triangle soup under a sky) at 12,500 and 100,000 triangles: eight
+    // times the faces. Pairwise factors would grow 64 times; the hierarchy's links must stay
+    // near the 8 of a linear cost. (Counts, not seconds: the 100,000 take ~20 s on 2 cores.)
+    let dir = std::env::temp_dir().join(format!("radcast-scaling-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let links = |triangles: usize| {
+        let town = solver::generate::town(triangles, 1, "town.mtl");
+        let path = dir.join(format!("town-{triangles}.obj"));
+        std::fs::write(&path, &town.obj).expect("writes");
+        std::fs::write(dir.join("town.mtl"), &town.mtl).expect("writes");
+        let scene = Scene::load_obj(&path).expect("loads");
+        let faces = scene.faces.len();
+        let stats = solve(scene, 0.9).report.hierarchy.expect("hierarchical");
+        println!(
+            "{triangles} triangles: {faces} faces, {} leaves, {} links ({:.1} a face)",
+            stats.elements,
+            stats.links,
+            stats.links as f64 / faces as f64
+        );
+        assert!(!stats.leaf_budget_reached && !stats.link_budget_reached);
+        (faces, stats.links)
+    };
+    let (small_faces, small) = links(12_500);
+    let (large_faces, large) = links(100_000);
+    let _ = std::fs::remove_dir_all(&dir);
+    let face_ratio = large_faces as f64 / small_faces as f64;
+    assert!(
+        large_faces >= 100_000 && face_ratio > 7.0,
+        "{large_faces} / {small_faces}"
+    );
+    let link_ratio = large as f64 / small as f64;
+    assert!(
+        link_ratio < 1.5 * face_ratio,
+        "links grew {link_ratio:.1} times for {face_ratio:.1} times the faces"
+    );
+}
