@@ -78,7 +78,22 @@ impl EdgeGrid {
             let corners = face.polygon.corners();
             for k in 0..corners.len() {
                 let (p, q) = (corners[k], corners[(k + 1) % corners.len()]);
-                let keys: Vec<[i64; 3]> = grid.keys(p.min(q), p.max(q)).collect();
+                // Along the edge a cell at a time: a long slanted edge's box would span a
+                // cube of cells.
+                let steps = (p.distance(q) / grid.cell)
+                    .ceil()
+                    .clamp(1.0, 4.0 * MAX_CELLS_PER_SIDE);
+                let mut keys: Vec<[i64; 3]> = (0..steps as usize)
+                    .flat_map(|i| {
+                        let (a, b) = (
+                            p.lerp(q, i as f64 / steps),
+                            p.lerp(q, (i + 1) as f64 / steps),
+                        );
+                        grid.keys(a.min(b), a.max(b))
+                    })
+                    .collect();
+                keys.sort_unstable();
+                keys.dedup();
                 for key in keys {
                     grid.cells.entry(key).or_default().push((f as u32, k as u8));
                 }
@@ -87,22 +102,46 @@ impl EdgeGrid {
         grid
     }
 
+    /// How many cells the box from `lo` to `hi` covers.
+    fn cell_count(&self, lo: DVec3, hi: DVec3) -> f64 {
+        let at = |p: DVec3| ((p - self.origin) / self.cell).floor();
+        let span = at(hi) - at(lo) + DVec3::ONE;
+        span.x * span.y * span.z
+    }
+
+    /// The cell holding `p`.
+    fn key(&self, p: DVec3) -> [i64; 3] {
+        ((p - self.origin) / self.cell)
+            .floor()
+            .as_i64vec3()
+            .to_array()
+    }
+
     /// The cells a box from `lo` to `hi` covers.
     fn keys(&self, lo: DVec3, hi: DVec3) -> impl Iterator<Item = [i64; 3]> {
-        let at = |p: DVec3| ((p - self.origin) / self.cell).floor().as_i64vec3();
-        let (a, b) = (at(lo), at(hi));
-        (a.x..=b.x)
-            .flat_map(move |x| (a.y..=b.y).flat_map(move |y| (a.z..=b.z).map(move |z| [x, y, z])))
+        let (a, b) = (self.key(lo), self.key(hi));
+        (a[0]..=b[0]).flat_map(move |x| {
+            (a[1]..=b[1]).flat_map(move |y| (a[2]..=b[2]).map(move |z| [x, y, z]))
+        })
     }
 
     /// The edges near the box from `lo` to `hi`, each once.
     fn edges_near(&self, lo: DVec3, hi: DVec3) -> Vec<(u32, u8)> {
-        let mut edges: Vec<(u32, u8)> = self
-            .keys(lo, hi)
-            .filter_map(|key| self.cells.get(&key))
-            .flatten()
-            .copied()
-            .collect();
+        let mut edges: Vec<(u32, u8)> = if self.cell_count(lo, hi) > self.cells.len() as f64 {
+            // A box wider than the occupied grid (a large slanted face): the occupied cells in it.
+            let (a, b) = (self.key(lo), self.key(hi));
+            self.cells
+                .iter()
+                .filter(|(key, _)| (0..3).all(|i| a[i] <= key[i] && key[i] <= b[i]))
+                .flat_map(|(_, edges)| edges.iter().copied())
+                .collect()
+        } else {
+            self.keys(lo, hi)
+                .filter_map(|key| self.cells.get(&key))
+                .flatten()
+                .copied()
+                .collect()
+        };
         edges.sort_unstable();
         edges.dedup();
         edges
@@ -395,6 +434,28 @@ mod tests {
             );
         }
         assert_eq!(split_at_contacts(tiles.faces.clone()).1, 0);
+    }
+
+    #[test]
+    fn a_large_slanted_face_among_many_small_ones_is_searched_by_the_occupied_cells() {
+        // Tiny triangles make the grid fine (1,024 cells a side); a sliver slanted across the
+        // whole scene has a box of 1,024^3 cells and edges as long as the scene: their boxes
+        // walked cell by cell would take minutes and gigabytes. Nothing stands on anything.
+        let mut scene = Scene::default();
+        let grey = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        let object = scene.add_object("dust");
+        for i in 0..2_000 {
+            let o = dvec3((i % 13) as f64, (i % 7) as f64, (i % 11) as f64) * 7.0;
+            scene.add_polygon(object, &[o, o + DVec3::X * 1e-3, o + DVec3::Y * 1e-3], grey);
+        }
+        let sliver = scene.add_object("sliver");
+        let far = dvec3(100.0, 100.0, 100.0);
+        scene.add_polygon(sliver, &[DVec3::ZERO, far, far + DVec3::Z * 1e-3], grey);
+        let (faces, cut) = split_at_contacts(scene.faces.clone());
+        assert_eq!((faces.len(), cut), (scene.faces.len(), 0));
     }
 
     #[test]
