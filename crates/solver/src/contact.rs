@@ -24,6 +24,10 @@ const RELATIVE_TOLERANCE: f64 = 1e-6;
 /// Most grid cells along the scene's longest side: bounds the grid whatever the face sizes.
 const MAX_CELLS_PER_SIDE: f64 = 1024.0;
 
+/// Most pieces a face is cut into per contact segment on it. A segment quarters about two
+/// cells a level and cuts the last ones: a few dozen pieces.
+const MAX_PIECES_PER_SEGMENT: usize = 64;
+
 /// `faces` with every face cut along the contact segments of the faces that stand on it, and
 /// how many faces were cut. Pieces of one face follow one another, in the face's place.
 pub(crate) fn split_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
@@ -32,12 +36,16 @@ pub(crate) fn split_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
     let mut cut = 0;
     for (index, face) in faces.iter().enumerate() {
         let segments = contact_segments(&faces, index, &grid);
-        let pieces = cut_locally(
+        let mut pieces = cut_locally(
             face.polygon.corners().to_vec(),
             face.polygon.normal(),
             &segments,
             0,
         );
+        // A bound whatever the input: past it the face stays whole, as before contact lines.
+        if pieces.len() > MAX_PIECES_PER_SEGMENT * segments.len() {
+            pieces = vec![face.polygon.corners().to_vec()];
+        }
         if pieces.len() > 1 {
             cut += 1;
         }
@@ -175,7 +183,10 @@ fn contact_segments(faces: &[Face], index: usize, grid: &EdgeGrid) -> Vec<Line> 
         }
         let c = standing.corners();
         let (p, q) = (c[k as usize], c[(k as usize + 1) % c.len()]);
-        let in_plane = height(p).abs() <= tolerance && height(q).abs() <= tolerance;
+        // In the plane to a part in a million of the edge itself, not of the face: within a
+        // million-metre face's tolerance, a lamp a metre above it lay "in" it.
+        let flat = RELATIVE_TOLERANCE * p.distance(q).min(face.radius());
+        let in_plane = height(p).abs() <= flat && height(q).abs() <= flat;
         let in_front = c.iter().any(|v| height(*v) > tolerance);
         if in_plane && in_front && crosses_interior(corners, normal, p, q, tolerance) {
             lines.push(Line {
