@@ -248,7 +248,7 @@ fn cut_locally(cell: Vec<DVec3>, normal: DVec3, segments: &[Line], depth: u32) -
         .map(|s| s.direction.length())
         .fold(0.0, f64::max);
     if crossing.is_empty() || depth == MAX_CELL_DEPTH || radius <= 2.0 * longest {
-        return cut_along(&cell, normal, &crossing);
+        return cut_along(&cell, normal, &crossing, tolerance);
     }
     quarters(&cell)
         .into_iter()
@@ -290,11 +290,9 @@ fn side(line: Line, normal: DVec3, x: DVec3) -> f64 {
 }
 
 /// The convex polygon `corners` cut by each of `lines` that crosses it: convex pieces, their
-/// corners in the polygon's order. A cut that would leave a piece thinner than the tolerance is
+/// corners in the polygon's order. A cut that would leave a piece thinner than `tolerance` is
 /// not made.
-fn cut_along(corners: &[DVec3], normal: DVec3, lines: &[Line]) -> Vec<Vec<DVec3>> {
-    let radius = Polygon::triangle(corners[0], corners[1], corners[2]).radius();
-    let tolerance = RELATIVE_TOLERANCE * radius.max(f64::MIN_POSITIVE);
+fn cut_along(corners: &[DVec3], normal: DVec3, lines: &[Line], tolerance: f64) -> Vec<Vec<DVec3>> {
     let mut pieces = vec![corners.to_vec()];
     for &line in lines {
         pieces = pieces
@@ -476,11 +474,11 @@ mod tests {
             point: dvec3(1e-9, 0.0, 0.0),
             direction: DVec3::Z,
         };
-        assert_eq!(cut_along(&square, DVec3::Y, &[near_edge]).len(), 1);
+        assert_eq!(cut_along(&square, DVec3::Y, &[near_edge], 1e-6).len(), 1);
         let middle = Line {
             point: dvec3(0.5, 0.0, 0.0),
             direction: DVec3::Z,
         };
-        assert_eq!(cut_along(&square, DVec3::Y, &[middle]).len(), 2);
+        assert_eq!(cut_along(&square, DVec3::Y, &[middle], 1e-6).len(), 2);
     }
 }
