@@ -10,9 +10,7 @@ use crate::sampling::{cosine_direction, splitmix64, stratified_4d, stratified_uv
 use crate::scene::Scene;
 use glam::{DVec3, Vec3A};
 use obvhs::bvh2::{Bvh2, builder::build_bvh2};
-use obvhs::{
-    Boundable, BvhBuildParams, aabb::Aabb, cwbvh::CwBvh, cwbvh::builder::build_cwbvh, ray::Ray,
-};
+use obvhs::{BvhBuildParams, aabb::Aabb, cwbvh::CwBvh, cwbvh::builder::build_cwbvh, ray::Ray};
 use std::time::Duration;
 
 /// One input face as an occluder, in f32 relative to the scene centre.
@@ -22,13 +20,19 @@ struct OccluderFace {
     normal: Vec3A,
 }
 
-impl Boundable for OccluderFace {
-    fn aabb(&self) -> Aabb {
-        Aabb::from_points(&self.corners[..self.arity])
-    }
-}
-
 impl OccluderFace {
+    /// Whether the face keeps an area in f32. One that collapses to a point or a line (a room
+    /// 1e30 away from the rest of its scene) bounds no region its edge tests can tell: every
+    /// ray through its plane would "hit" it, and a few dozen identical boxes nested the BVH
+    /// past its traversal stack. It is left out of the index.
+    fn has_area(&self) -> bool {
+        let c = &self.corners[..self.arity];
+        let newell: Vec3A = (0..self.arity)
+            .map(|k| c[k].cross(c[(k + 1) % self.arity]))
+            .sum();
+        newell.length_squared() > 0.0
+    }
+
     /// Ray parameter of the hit, or infinity. Edges are inclusive with a relative margin, so
     /// a ray through the seam of two faces that share an edge hits one of them: no cracks.
     fn intersect(&self, ray: &Ray) -> f32 {
@@ -86,6 +90,8 @@ impl Frame {
 pub struct Occluders {
     index: Index,
     faces: Vec<OccluderFace>,
+    /// The faces the index holds ([`OccluderFace::has_area`]), by their primitive number in it.
+    indexed: Vec<u32>,
     frame: Frame,
     /// Rays start this far along (in [`Frame`] units), relative to nothing but the scene's size.
     start_offset: f32,
@@ -155,18 +161,29 @@ impl Occluders {
                 }
             })
             .collect();
+        let indexed: Vec<u32> = (0..faces.len() as u32)
+            .filter(|&f| faces[f as usize].has_area())
+            .collect();
+        let boxes: Vec<Aabb> = indexed
+            .iter()
+            .map(|&f| {
+                let face = &faces[f as usize];
+                Aabb::from_points(&face.corners[..face.arity])
+            })
+            .collect();
         let params = BvhBuildParams::medium_build();
         let index = match backend {
-            _ if faces.is_empty() => Index::Linear,
+            _ if boxes.is_empty() => Index::Linear,
             RayBackend::CwBvh => {
-                Index::CwBvh(build_cwbvh(&faces, params, &mut Duration::default()))
+                Index::CwBvh(build_cwbvh(&boxes, params, &mut Duration::default()))
             }
-            RayBackend::Bvh2 => Index::Bvh2(build_bvh2(&faces, params, &mut Duration::default())),
+            RayBackend::Bvh2 => Index::Bvh2(build_bvh2(&boxes, params, &mut Duration::default())),
             RayBackend::Linear => Index::Linear,
         };
         Occluders {
             index,
             faces,
+            indexed,
             start_offset: 1e-6 * diagonal as f32 / unit as f32,
             frame,
         }
@@ -198,10 +215,10 @@ impl Occluders {
             Index::CwBvh(bvh) => {
                 let mut record = obvhs::ray::RayHit::none();
                 if bvh.ray_traverse(ray, &mut record, |ray, id| {
-                    hit(ray, bvh.primitive_indices[id])
+                    hit(ray, self.indexed[bvh.primitive_indices[id] as usize])
                 }) {
                     consider(
-                        bvh.primitive_indices[record.primitive_id as usize],
+                        self.indexed[bvh.primitive_indices[record.primitive_id as usize] as usize],
                         record.t,
                     );
                 }
@@ -209,17 +226,18 @@ impl Occluders {
             Index::Bvh2(bvh) => {
                 let mut record = obvhs::ray::RayHit::none();
                 if bvh.ray_traverse(ray, &mut record, |ray, id| {
-                    hit(ray, bvh.primitive_indices[id])
+                    hit(ray, self.indexed[bvh.primitive_indices[id] as usize])
                 }) {
                     consider(
-                        bvh.primitive_indices[record.primitive_id as usize],
+                        self.indexed[bvh.primitive_indices[record.primitive_id as usize] as usize],
                         record.t,
                     );
                 }
             }
-            Index::Linear => {
-                (0..self.faces.len() as u32).for_each(|face| consider(face, hit(&ray, face)))
-            }
+            Index::Linear => self
+                .indexed
+                .iter()
+                .for_each(|&face| consider(face, hit(&ray, face))),
         }
         (best_face != u32::MAX).then(|| Hit {
             face: best_face,
@@ -287,15 +305,16 @@ impl Occluders {
             }
         };
         match &self.index {
-            Index::CwBvh(bvh) => {
-                bvh.ray_traverse_miss(ray, |ray, id| hit(ray, bvh.primitive_indices[id]))
-            }
-            Index::Bvh2(bvh) => {
-                bvh.ray_traverse_miss(ray, |ray, id| hit(ray, bvh.primitive_indices[id]))
-            }
-            Index::Linear => {
-                (0..self.faces.len() as u32).all(|face| hit(&ray, face) == f32::INFINITY)
-            }
+            Index::CwBvh(bvh) => bvh.ray_traverse_miss(ray, |ray, id| {
+                hit(ray, self.indexed[bvh.primitive_indices[id] as usize])
+            }),
+            Index::Bvh2(bvh) => bvh.ray_traverse_miss(ray, |ray, id| {
+                hit(ray, self.indexed[bvh.primitive_indices[id] as usize])
+            }),
+            Index::Linear => self
+                .indexed
+                .iter()
+                .all(|&face| hit(&ray, face) == f32::INFINITY),
         }
     }
 }
@@ -305,6 +324,39 @@ mod tests {
     use super::*;
     use crate::scene::{Material, Rgb};
     use glam::dvec3;
+
+    #[test]
+    fn faces_that_collapse_to_a_point_in_f32_block_nothing() {
+        // Sixty-four unit squares at the origin and one 1e30 away: in the occluders' f32
+        // frame the squares are one point. Each still "blocked" every segment through its
+        // plane (its edges were zero, so every crossing was inside), and their identical boxes
+        // nested the BVH past its traversal stack (obvhs's checks panicked: an object moved
+        // 9e29 away in the Cornell box, once contact lines had cut its floor into pieces).
+        let mut scene = Scene::default();
+        let material = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        let square = |z: f64, x: f64| {
+            [
+                dvec3(x, 0.0, z),
+                dvec3(x + 1.0, 0.0, z),
+                dvec3(x + 1.0, 1.0, z),
+                dvec3(x, 1.0, z),
+            ]
+        };
+        let near = scene.add_object("near");
+        for k in 0..64 {
+            scene.add_polygon(near, &square(k as f64 * 1e-3, 0.0), material);
+        }
+        let far = scene.add_object("far");
+        scene.add_polygon(far, &square(0.0, 1e30), material);
+        for backend in [RayBackend::CwBvh, RayBackend::Bvh2, RayBackend::Linear] {
+            let occluders = Occluders::with_backend(&scene, backend);
+            let (a, b) = (dvec3(1e29, 1e29, -1.0), dvec3(1e29, 1e29, 1.0));
+            assert!(occluders.segment_is_clear(a, b, [u32::MAX, u32::MAX]), "{backend:?}");
+        }
+    }
 
     #[test]
     fn a_wall_between_two_points_blocks_and_its_own_faces_do_not() {
