@@ -354,7 +354,10 @@ mod tests {
         for backend in [RayBackend::CwBvh, RayBackend::Bvh2, RayBackend::Linear] {
             let occluders = Occluders::with_backend(&scene, backend);
             let (a, b) = (dvec3(1e29, 1e29, -1.0), dvec3(1e29, 1e29, 1.0));
-            assert!(occluders.segment_is_clear(a, b, [u32::MAX, u32::MAX]), "{backend:?}");
+            assert!(
+                occluders.segment_is_clear(a, b, [u32::MAX, u32::MAX]),
+                "{backend:?}"
+            );
         }
     }
 
