@@ -1,5 +1,5 @@
-//! Deterministic sample patterns: hashes that seed them per pair, low-discrepancy sequences
-//! on the unit square and the 4-cube, and cosine-distributed directions. Every ray the solver casts comes from
+//! Deterministic sample patterns: hashes that seed them per pair, a low-discrepancy sequence
+//! on the unit square, and cosine-distributed directions. Every ray the solver casts comes from
 //! here, so results are the same on any thread count.
 
 use glam::DVec3;
@@ -32,23 +32,6 @@ pub fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
     );
     let inset = |x: f64| 1e-3 + (1.0 - 2e-3) * x.fract();
     (inset(u0 + k as f64 * A1), inset(v0 + k as f64 * A2))
-}
-
-/// The k-th point of Roberts' R4 sequence, rotated by `offset` and kept off the borders like
-/// [`stratified_uv`]: four coordinates that fill the 4-cube evenly together, for a point and a
-/// direction drawn as one sample. Two R2 points of the same index are no substitute: they
-/// differ by a constant shift, so such pairs cover only a 2-D slice of the point-direction
-/// space (a ceiling's view of a room's opening was missed that way, and its row scaled to one).
-pub fn stratified_4d(k: u32, offset: u64) -> [f64; 4] {
-    // Roberts 2018: 1/g^i for g = 1.1673039782614187, the positive root of x^5 = x + 1.
-    const G: f64 = 1.167_303_978_261_418_7;
-    let mut seed = offset;
-    [1, 2, 3, 4].map(|i| {
-        seed = splitmix64(seed);
-        let start = (seed >> 11) as f64 / (1u64 << 53) as f64;
-        let x = start + k as f64 / G.powi(i);
-        1e-3 + (1.0 - 2e-3) * x.fract()
-    })
 }
 
 /// A unit direction about the unit `normal` with density `cos / pi`, from two uniform numbers

@@ -6,7 +6,7 @@
 //! origin keeps its precision and one of any size meets the same arithmetic.
 
 use crate::mesh::Patch;
-use crate::sampling::{cosine_direction, splitmix64, stratified_4d, stratified_uv};
+use crate::sampling::{cosine_direction, splitmix64, stratified_uv};
 use crate::scene::Scene;
 use glam::{DVec3, Vec3A};
 use obvhs::bvh2::{Bvh2, builder::build_bvh2};
@@ -124,6 +124,10 @@ const BURIED_RAYS: u32 = 8;
 
 /// Rays a receiver casts over its hemisphere to decide whether its view is closed.
 const CLOSURE_RAYS: u32 = 64;
+
+/// The closed-view ray `k` takes direction `k * DIRECTION_STRIDE mod CLOSURE_RAYS`: a
+/// permutation (odd against a power of two) that pairs near origins with far-apart directions.
+const DIRECTION_STRIDE: u32 = 37;
 
 impl Occluders {
     /// Builds the default index over every face of `scene`.
@@ -257,7 +261,12 @@ impl Occluders {
         let seed = splitmix64(index as u64 ^ 0xC105_ED00);
         let mut buried = 0;
         for k in 0..CLOSURE_RAYS {
-            let [u, v, s, t] = stratified_4d(k, seed);
+            let (u, v) = stratified_uv(k, seed);
+            // The direction from another index of the sequence than the origin: two R2 points
+            // of one index differ by a constant shift, which tied each origin to one direction
+            // (a 2-D slice of origin-direction pairs; the Cornell ceiling behind the lamp saw
+            // the box's opening from no pair and was taken for closed).
+            let (s, t) = stratified_uv((k * DIRECTION_STRIDE) % CLOSURE_RAYS, splitmix64(seed));
             let origin = p.polygon.point_at(u, v);
             let seen = self
                 .closest_hit(origin, cosine_direction(p.normal, s, t), p.face)
