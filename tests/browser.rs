@@ -3,7 +3,7 @@
 //! agrees with the headless client's at the same camera and size. `.ci/run` installs Chromium
 //! when it is missing; without it this test says so and skips.
 
-use client::render::{View, render};
+use client::render::{TextureImage, View, render};
 use server::prepared::{prepare, shared_for};
 use server::{Limits, listen, solving};
 use solver::{PatchTarget, SolveRequest};
@@ -52,6 +52,9 @@ async fn the_page_shows_the_final_frame_as_the_headless_client_draws_it() {
         return;
     }
     compare_page_with_client("scenes/cornell-box.obj".as_ref()).await;
+    // Textures: the page multiplies the light by texel / mean with the nearest texel, as the
+    // client does.
+    compare_page_with_client("scenes/tiled-cornell-box.obj".as_ref()).await;
     // A camera whose up is +x (rolled a quarter turn): the page must honour the scene's up.
     let rolled = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string("scenes/cornell-box.obj").unwrap();
@@ -117,13 +120,20 @@ async fn compare_page_with_client(scene: &std::path::Path) {
     let size = body_data(&dom, "canvas").expect("the page names its canvas size");
     let (width, height) = size.split_once('x').unwrap();
     let (width, height): (u32, u32) = (width.parse().unwrap(), height.parse().unwrap());
-    let geometry = shared.hub.geometry().model.clone();
+    let served = shared.hub.geometry();
+    let geometry = served.model.clone();
+    let textures: Vec<TextureImage> = served
+        .textures
+        .iter()
+        .map(|png| TextureImage::from_png(png).unwrap())
+        .collect();
     let mut buffer = wire::ColourBuffer::default();
     buffer
         .apply(&wire::ServerMessage::decode(&current.full).unwrap())
         .unwrap();
     let expected = render(
         &geometry,
+        &textures,
         &buffer,
         &View::for_scene(&geometry),
         width,

@@ -57,8 +57,14 @@ async fn synthetic_server(vertices: u32, limits: Limits) -> (SocketAddr, Arc<Sha
         patch_objects: vec![0; vertices.saturating_sub(2) as usize],
         objects: vec!["strip".into()],
         camera: None,
+        textures: None,
     };
-    let hub = Hub::new(7, &geometry, &vec![[0.0; 3]; vertices as usize]);
+    let hub = Hub::new(
+        7,
+        &geometry,
+        std::sync::Arc::from([]),
+        &vec![[0.0; 3]; vertices as usize],
+    );
     let shared = Shared::new(hub, limits, TOKEN.into());
     (serve(shared.clone()).await, shared)
 }
@@ -401,7 +407,7 @@ async fn the_rendered_cornell_box_has_red_left_and_green_right() {
         [278.0, 273.0, -800.0],
         "the published Cornell camera"
     );
-    let image = client::render::render(&geometry, &outcome.buffer, &view, 128, 128);
+    let image = client::render::render(&geometry, &[], &outcome.buffer, &view, 128, 128);
     let mean = |x0: u32, x1: u32| {
         let mut sum = [0.0f64; 3];
         for y in 40..88 {

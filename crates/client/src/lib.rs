@@ -39,6 +39,28 @@ pub fn fetch_geometry(base: &str) -> anyhow::Result<wire::Geometry> {
     wire::Geometry::decode(&bytes).with_context(|| format!("{base}/api/scene"))
 }
 
+/// The PNG of every texture `geometry`'s texture section names, from `/api/textures/{index}`,
+/// decoded; none for an untextured scene.
+pub fn fetch_textures(
+    base: &str,
+    geometry: &wire::Geometry,
+) -> anyhow::Result<Vec<render::TextureImage>> {
+    let count = geometry.textures.as_ref().map_or(0, |t| t.means.len());
+    (0..count)
+        .map(|index| {
+            let url = format!("{base}/api/textures/{index}");
+            render::TextureImage::from_png(&http_get(&url, 1 << 30)?).with_context(|| url)
+        })
+        .collect()
+}
+
+/// The geometry and its textures: what a viewer draws.
+pub fn fetch_scene(base: &str) -> anyhow::Result<(wire::Geometry, Vec<render::TextureImage>)> {
+    let geometry = fetch_geometry(base)?;
+    let textures = fetch_textures(base, &geometry)?;
+    Ok((geometry, textures))
+}
+
 /// `/metrics` as text.
 pub fn fetch_metrics(base: &str) -> anyhow::Result<String> {
     String::from_utf8(http_get(&format!("{base}/metrics"), 1 << 20)?)

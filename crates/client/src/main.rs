@@ -5,7 +5,7 @@ use clap::{Parser, Subcommand};
 use client::render::{View, render};
 use client::session::{ViewerOutcome, next_binary, request_full, watch_until_final_on_any};
 use client::viewer::{Step, Viewer};
-use client::{fetch_geometry, fetch_solution, http_base};
+use client::{fetch_scene, fetch_solution, http_base};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -351,7 +351,7 @@ async fn watch(
 ) -> anyhow::Result<()> {
     let fetch = |url: &str| {
         let base = http_base(url);
-        tokio::task::spawn_blocking(move || fetch_geometry(&base?))
+        tokio::task::spawn_blocking(move || fetch_scene(&base?))
     };
     let mut geometry = match &out_dir {
         Some(dir) => {
@@ -411,11 +411,13 @@ async fn watch(
                         data.len(),
                         if info.is_final { ", final" } else { "" }
                     );
-                    if let (Some(dir), Some(geometry), true) = (&out_dir, &geometry, info.is_final)
+                    if let (Some(dir), Some((geometry, textures)), true) =
+                        (&out_dir, &geometry, info.is_final)
                     {
                         let path = dir.join(format!("version-{:06}.png", info.solution_version));
                         render(
                             geometry,
+                            textures,
                             viewer.buffer(),
                             &View::for_scene(geometry),
                             512,
@@ -464,9 +466,9 @@ async fn view(
     let limit = Duration::try_from_secs_f64(timeout)
         .context("--timeout must be a positive number of seconds")?;
     let base = http_base(&urls[0])?;
-    let geometry = {
+    let (geometry, textures) = {
         let base = base.clone();
-        tokio::task::spawn_blocking(move || fetch_geometry(&base)).await??
+        tokio::task::spawn_blocking(move || fetch_scene(&base)).await??
     };
     let viewers: Vec<_> = (0..clients)
         .map(|k| {
@@ -513,7 +515,7 @@ async fn view(
         );
         for (c, view) in cameras.iter().enumerate() {
             let path = output_path(&out, v, clients, c, cameras.len());
-            render(&geometry, &outcome.buffer, view, width, height).write_png(&path)?;
+            render(&geometry, &textures, &outcome.buffer, view, width, height).write_png(&path)?;
             say!("  wrote {}", path.display());
         }
     }

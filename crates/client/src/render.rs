@@ -1,8 +1,9 @@
 //! A small software rasterizer: z-buffered triangles with the vertices' radiosity interpolated
-//! smoothly, tone-mapped to 8-bit sRGB as [`wire::display`] documents.
+//! smoothly, textured surfaces modulated by `texel / mean` (docs/PROTOCOL.md), tone-mapped to
+//! 8-bit sRGB as [`wire::display`] documents.
 
 use anyhow::{Context, bail};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use std::path::Path;
 use wire::display::{corners, exposure, srgb_byte, tone_map};
 use wire::{ColourBuffer, Geometry};
@@ -116,9 +117,73 @@ impl Image {
     }
 }
 
-/// Renders the patches from `view`; both sides of every face are drawn.
+/// A texture as a viewer shows it: linear RGB texels, row by row from the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureImage {
+    /// Width in texels.
+    pub width: u32,
+    /// Height in texels.
+    pub height: u32,
+    /// Linear RGB (sRGB bytes decoded), row-major.
+    pub texels: Vec<Vec3>,
+}
+
+impl TextureImage {
+    /// Decodes a PNG (any colour type and depth; alpha is ignored).
+    pub fn from_png(bytes: &[u8]) -> anyhow::Result<TextureImage> {
+        let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+        decoder.set_transformations(png::Transformations::normalize_to_color8());
+        let mut reader = decoder.read_info().context("not a PNG")?;
+        let mut data = vec![0; reader.output_buffer_size().context("PNG too large")?];
+        let frame = reader.next_frame(&mut data).context("decoding the PNG")?;
+        let channels = frame.color_type.samples();
+        let srgb = |b: u8| {
+            let c = f32::from(b) / 255.0;
+            match c <= 0.04045 {
+                true => c / 12.92,
+                false => ((c + 0.055) / 1.055).powf(2.4),
+            }
+        };
+        let texels = data[..frame.buffer_size()]
+            .chunks_exact(channels)
+            .map(|t| match channels {
+                1 | 2 => Vec3::splat(srgb(t[0])),
+                _ => Vec3::new(srgb(t[0]), srgb(t[1]), srgb(t[2])),
+            })
+            .collect();
+        Ok(TextureImage {
+            width: frame.width,
+            height: frame.height,
+            texels,
+        })
+    }
+
+    /// The texel under `(u, v)` (glTF's convention: `(0, 0)` the top-left corner), repeating.
+    fn nearest(&self, uv: Vec2) -> Vec3 {
+        let wrap =
+            |t: f32, n: u32| ((t - t.floor()) * n as f32).min(n as f32 - 1.0).max(0.0) as u32;
+        let (x, y) = (wrap(uv.x, self.width), wrap(uv.y, self.height));
+        self.texels[(y * self.width + x) as usize]
+    }
+}
+
+/// A corner as the rasterizer carries it: camera-space position, radiosity, texture coordinates.
+#[derive(Clone, Copy)]
+struct Corner {
+    at: Vec3,
+    radiosity: Vec3,
+    uv: Vec2,
+}
+
+/// How a triangle's pixels are shaded: its texture and `1 / mean` per channel (0 where the mean
+/// is 0), or none.
+type Shading<'a> = Option<(&'a TextureImage, Vec3)>;
+
+/// Renders the patches from `view`, each textured patch showing texture `textures[i]` as the
+/// geometry's texture section says; both sides of every face are drawn.
 pub fn render(
     geometry: &Geometry,
+    textures: &[TextureImage],
     buffer: &ColourBuffer,
     view: &View,
     width: u32,
@@ -130,19 +195,26 @@ pub fn render(
     let camera = Camera::new(view, geometry, width, height);
     let mut inverse_depth = vec![0.0f32; (width * height) as usize];
     let mut linear = vec![Vec3::ZERO; (width * height) as usize];
-    for patch in &geometry.patches {
+    let surface = geometry.textures.as_ref();
+    for (p, patch) in geometry.patches.iter().enumerate() {
+        let shading: Shading = surface.and_then(|s| {
+            let t = s.patch_textures[p];
+            let image = textures.get(t as usize)?;
+            Some((image, Vec3::from(s.modulation(t, [1.0; 3]))))
+        });
+        let uv = |i: u32| surface.map_or(Vec2::ZERO, |s| Vec2::from(s.uvs[i as usize]));
         let c = corners(patch);
         for k in 1..c.len() - 1 {
-            let triangle = [c[0], c[k], c[k + 1]].map(|i| {
-                (
-                    camera.to_camera(Vec3::from(geometry.positions[i as usize])),
-                    colours[i as usize],
-                )
+            let triangle = [c[0], c[k], c[k + 1]].map(|i| Corner {
+                at: camera.to_camera(Vec3::from(geometry.positions[i as usize])),
+                radiosity: colours[i as usize],
+                uv: uv(i),
             });
             let polygon = clip_near(&triangle, camera.near);
             for j in 1..polygon.len().saturating_sub(1) {
                 camera.raster(
                     &[polygon[0], polygon[j], polygon[j + 1]],
+                    shading,
                     &mut inverse_depth,
                     &mut linear,
                 );
@@ -198,11 +270,17 @@ impl Camera {
         Vec3::new(d.dot(self.right), d.dot(self.up), d.dot(self.forward))
     }
 
-    /// Fills one camera-space triangle (depth >= near) with perspective-correct colours,
-    /// keeping the nearest surface per pixel.
-    fn raster(&self, triangle: &[(Vec3, Vec3); 3], inverse_depth: &mut [f32], linear: &mut [Vec3]) {
+    /// Fills one camera-space triangle (depth >= near) with perspective-correct colours (and
+    /// texture coordinates), keeping the nearest surface per pixel.
+    fn raster(
+        &self,
+        triangle: &[Corner; 3],
+        shading: Shading,
+        inverse_depth: &mut [f32],
+        linear: &mut [Vec3],
+    ) {
         let (w, h) = (self.width as f32, self.height as f32);
-        let screen = triangle.map(|(p, _)| {
+        let screen = triangle.map(|Corner { at: p, .. }| {
             Vec3::new(
                 0.5 * w + self.focal_pixels * p.x / p.z,
                 0.5 * h - self.focal_pixels * p.y / p.z,
@@ -245,28 +323,131 @@ impl Camera {
                     continue;
                 }
                 inverse_depth[index] = inverse;
-                linear[index] = (triangle[0].1 * weights[0]
-                    + triangle[1].1 * weights[1]
-                    + triangle[2].1 * weights[2])
+                let radiosity = (triangle[0].radiosity * weights[0]
+                    + triangle[1].radiosity * weights[1]
+                    + triangle[2].radiosity * weights[2])
                     / inverse;
+                linear[index] = match shading {
+                    Some((image, inverse_mean)) => {
+                        let uv = (triangle[0].uv * weights[0]
+                            + triangle[1].uv * weights[1]
+                            + triangle[2].uv * weights[2])
+                            / inverse;
+                        radiosity * image.nearest(uv) * inverse_mean
+                    }
+                    None => radiosity,
+                };
             }
         }
     }
 }
 
 /// Clips a camera-space triangle to `depth >= near`; returns up to four corners.
-fn clip_near(triangle: &[(Vec3, Vec3); 3], near: f32) -> Vec<(Vec3, Vec3)> {
+fn clip_near(triangle: &[Corner; 3], near: f32) -> Vec<Corner> {
     let mut out = Vec::with_capacity(4);
     for k in 0..3 {
         let (a, b) = (triangle[k], triangle[(k + 1) % 3]);
-        let (da, db) = (a.0.z - near, b.0.z - near);
+        let (da, db) = (a.at.z - near, b.at.z - near);
         if da >= 0.0 {
             out.push(a);
         }
         if (da >= 0.0) != (db >= 0.0) {
             let t = da / (da - db);
-            out.push((a.0.lerp(b.0, t), a.1.lerp(b.1, t)));
+            out.push(Corner {
+                at: a.at.lerp(b.at, t),
+                radiosity: a.radiosity.lerp(b.radiosity, t),
+                uv: a.uv.lerp(b.uv, t),
+            });
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use wire::geometry::SurfaceTextures;
+    use wire::{FrameInfo, FullFrame, ServerMessage};
+
+    /// A 2 x 2 square at z = 0 facing a camera on -z, lit evenly at 1 W/m^2, textured with a
+    /// white-black checker whose linear mean is 0.5.
+    #[test]
+    fn a_textured_patch_shows_its_light_times_texel_over_mean() {
+        let geometry = Geometry {
+            positions: vec![
+                [-1.0, -1.0, 0.0],
+                [1.0, -1.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [-1.0, 1.0, 0.0],
+            ],
+            patches: vec![[0, 1, 2, 3]],
+            patch_objects: vec![0],
+            objects: vec!["square".into()],
+            camera: None,
+            // v down: y = 1 is the image's top row.
+            textures: Some(SurfaceTextures {
+                means: vec![[0.5; 3]],
+                patch_textures: vec![0],
+                uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]],
+            }),
+        };
+        let (white, black) = (Vec3::ONE, Vec3::ZERO);
+        let checker = TextureImage {
+            width: 2,
+            height: 2,
+            texels: vec![white, black, black, white],
+        };
+        let mut buffer = ColourBuffer::default();
+        let info = FrameInfo {
+            solution_version: 1,
+            sent_at_unix_micros: 0,
+            scale: 1.0,
+            vertex_count: 4,
+            is_final: true,
+        };
+        let colours = vec![wire::encode_colour([1.0; 3], 1.0); 4];
+        buffer
+            .apply(&ServerMessage::Full(FullFrame { info, colours }))
+            .unwrap();
+        let view = View::parse("0,0,-5,0,0,0,0,1,0,30").unwrap();
+        let image = render(&geometry, &[checker], &buffer, &view, 64, 64);
+        // Exposure 0.18 / 1 (every vertex at luminance 1); a white texel shows 1 / 0.5 of it.
+        let lit = srgb_byte(tone_map([2.0; 3], 0.18)[0]);
+        // Seen from -z, the image's left is the square's +x: its top-left quarter shows the
+        // texture's top-right texel (black), its top-right quarter the top-left one (white).
+        assert_eq!(image.pixel(16, 16), [0; 3]);
+        assert_eq!(image.pixel(48, 16), [lit; 3]);
+        assert_eq!(image.pixel(16, 48), [lit; 3]);
+        assert_eq!(image.pixel(48, 48), [0; 3]);
+        // Without its texture the square shows the light itself.
+        let plain = render(&geometry, &[], &buffer, &view, 64, 64);
+        assert_eq!(
+            plain.pixel(16, 16),
+            [srgb_byte(tone_map([0.18; 3], 1.0)[0]); 3]
+        );
+    }
+
+    #[test]
+    fn a_png_decodes_to_linear_texels() {
+        let image = Image {
+            width: 2,
+            height: 1,
+            rgb: vec![255, 128, 0, 0, 0, 0],
+        };
+        let folder = std::env::temp_dir().join(format!("radcast-render-{}", std::process::id()));
+        std::fs::create_dir_all(&folder).unwrap();
+        let path = folder.join("t.png");
+        image.write_png(&path).unwrap();
+        let texture = TextureImage::from_png(&std::fs::read(&path).unwrap()).unwrap();
+        std::fs::remove_dir_all(&folder).unwrap();
+        assert_eq!((texture.width, texture.height), (2, 1));
+        assert!(
+            (texture.texels[0] - Vec3::new(1.0, 0.2158605, 0.0))
+                .abs()
+                .max_element()
+                < 1e-6
+        );
+        assert_eq!(texture.texels[1], Vec3::ZERO);
+        assert!(TextureImage::from_png(b"not a png").is_err());
+    }
 }

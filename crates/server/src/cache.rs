@@ -264,6 +264,7 @@ mod tests {
                 reflectance: solver::Rgb::splat(reflectance),
                 emission: solver::Rgb::ZERO,
                 source: 0,
+                texture: None,
             }],
             ..Scene::default()
         };

@@ -72,11 +72,20 @@ pub struct GeometryState {
     pub encoded: Bytes,
     /// The same geometry, for exports.
     pub model: Arc<Geometry>,
+    /// The PNG of each texture the geometry's texture section names, served at
+    /// `/api/textures/{index}`; the same for every geometry version of a run.
+    pub textures: Arc<[Bytes]>,
 }
 
 impl GeometryState {
-    /// The state served for version `version` of `geometry` of scene `scene_id`.
-    pub fn new(scene_id: u64, version: u64, geometry: Geometry) -> GeometryState {
+    /// The state served for version `version` of `geometry` of scene `scene_id`, with its
+    /// textures' PNGs.
+    pub fn new(
+        scene_id: u64,
+        version: u64,
+        geometry: Geometry,
+        textures: Arc<[Bytes]>,
+    ) -> GeometryState {
         let hello = Hello {
             protocol_version: PROTOCOL_VERSION,
             scene_id,
@@ -89,6 +98,7 @@ impl GeometryState {
             hello: ServerMessage::Hello(hello).encode().into(),
             encoded: geometry.encode().into(),
             model: Arc::new(geometry),
+            textures,
         }
     }
 }
@@ -130,8 +140,14 @@ fn encode(radiosity: &[[f32; 3]], previous_scale: Option<f32>) -> (f32, Vec<u32>
 }
 
 impl Hub {
-    /// A hub for `geometry`, publishing `initial` (non-final) as version 1.
-    pub fn new(scene_id: u64, geometry: &Geometry, initial: &[[f32; 3]]) -> Hub {
+    /// A hub for `geometry` (with `textures`, the PNGs its texture section names), publishing
+    /// `initial` (non-final) as version 1.
+    pub fn new(
+        scene_id: u64,
+        geometry: &Geometry,
+        textures: Arc<[Bytes]>,
+        initial: &[[f32; 3]],
+    ) -> Hub {
         let (scale, colours) = encode(initial, None);
         let first = Self::frames(1, false, scale, colours, None, 1);
         Hub {
@@ -140,6 +156,7 @@ impl Hub {
                 scene_id,
                 1,
                 geometry.clone(),
+                textures,
             ))),
             scene_id,
         }
@@ -156,7 +173,13 @@ impl Hub {
     pub fn replace_geometry(&self, geometry: Geometry) -> u64 {
         let mut current = self.geometry.write().expect("geometry lock");
         let version = current.version + 1;
-        *current = Arc::new(GeometryState::new(self.scene_id, version, geometry));
+        let textures = current.textures.clone();
+        *current = Arc::new(GeometryState::new(
+            self.scene_id,
+            version,
+            geometry,
+            textures,
+        ));
         version
     }
 
@@ -259,6 +282,7 @@ mod tests {
             patch_objects: vec![0],
             objects: vec!["thing".into()],
             camera: None,
+            textures: None,
         }
     }
 
@@ -276,7 +300,7 @@ mod tests {
 
     #[test]
     fn the_scale_is_kept_while_the_brightest_stays_within_the_headroom() {
-        let hub = Hub::new(1, &geometry(2), &[[100.0; 3], [1.0; 3]]);
+        let hub = Hub::new(1, &geometry(2), Arc::from([]), &[[100.0; 3], [1.0; 3]]);
         let first = hub.current();
         // Dimmer by 16: within the 256x headroom, so the scale stays and a delta can carry it.
         hub.publish(&[[100.0 / 16.0; 3], [1.0; 3]], false);
@@ -304,7 +328,7 @@ mod tests {
 
     #[test]
     fn publishing_what_viewers_hold_makes_no_version_and_a_new_geometry_does() {
-        let hub = Hub::new(1, &geometry(1), &[[1.0; 3]]);
+        let hub = Hub::new(1, &geometry(1), Arc::from([]), &[[1.0; 3]]);
         assert_eq!(hub.publish(&[[1.0; 3]], false), 1);
         assert_eq!(hub.publish(&[[1.0; 3]], true), 2, "final is news");
         assert_eq!(hub.replace_geometry(geometry(3)), 2);

@@ -7,7 +7,8 @@ use glam::DVec3;
 use solver::{Mesh, PatchTarget, Progress, Scene, Session, SolveRequest};
 use std::path::Path;
 use std::sync::Arc;
-use wire::{Camera, Geometry, geometry::NO_CORNER};
+use wire::geometry::{NO_CORNER, NO_TEXTURE, SurfaceTextures};
+use wire::{Camera, Geometry};
 
 /// A scene loaded and meshed, ready to solve.
 pub struct Prepared {
@@ -81,7 +82,40 @@ pub fn geometry_of(scene: &Scene, mesh: &Mesh) -> Geometry {
             up: to_f32(v.up),
             vertical_fov_degrees: v.vertical_fov_degrees as f32,
         }),
+        textures: surface_textures(scene, mesh),
     }
+}
+
+/// Each patch's texture and each corner's coordinates in it, for a scene with textures.
+fn surface_textures(scene: &Scene, mesh: &Mesh) -> Option<SurfaceTextures> {
+    if scene.textures.is_empty() {
+        return None;
+    }
+    let mut uvs = vec![[0.0f32; 2]; mesh.positions.len()];
+    let patch_textures = mesh
+        .patches
+        .iter()
+        .map(|patch| match &scene.faces[patch.face as usize].texture {
+            Some(map) => {
+                for &c in &patch.corners[..patch.corner_count()] {
+                    let uv = map.uv_at(mesh.positions[c as usize]).map(|x| x as f32);
+                    // Coordinates are bounded at load; rounding cannot make them infinite.
+                    uvs[c as usize] = uv.map(|x| if x.is_finite() { x } else { 0.0 });
+                }
+                map.texture
+            }
+            None => NO_TEXTURE,
+        })
+        .collect();
+    Some(SurfaceTextures {
+        means: scene
+            .textures
+            .iter()
+            .map(|t| t.mean.as_vec3().to_array())
+            .collect(),
+        patch_textures,
+        uvs,
+    })
 }
 
 /// The state viewers see before the solve: every vertex at its face's emission.
@@ -96,6 +130,12 @@ pub fn hub_for(prepared: &Prepared) -> Hub {
     Hub::new(
         prepared.scene_id,
         &prepared.geometry,
+        prepared
+            .scene
+            .textures
+            .iter()
+            .map(|t| bytes::Bytes::from(t.png.to_vec()))
+            .collect(),
         &emission_only(&prepared.mesh),
     )
 }

@@ -18,13 +18,15 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use wire::SolutionSummary;
 
-/// The router: the browser viewer at `/`, `/healthz`, `/api/scene`, `/api/scene.glb`, `/api/solution`, `/api/objects`, `/ws`, `/metrics`,
+/// The router: the browser viewer at `/`, `/healthz`, `/api/scene`, `/api/scene.glb`,
+/// `/api/textures/{index}`, `/api/solution`, `/api/objects`, `/ws`, `/metrics`,
 /// and the control API `PUT /api/objects/{name}/emission` and `.../transform` (bearer token).
 pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/healthz", get(health))
         .route("/api/scene", get(scene))
         .route("/api/scene.glb", get(scene_glb))
+        .route("/api/textures/{index}", get(texture))
         .route("/api/solution", get(solution))
         .route("/api/objects", get(objects))
         .route("/ws", get(websocket))
@@ -56,17 +58,37 @@ async fn scene(State(shared): State<Arc<Shared>>) -> Response {
         .into_response()
 }
 
+/// Texture `index` of the geometry's texture section, as PNG. Its bytes never change while the
+/// server runs, so a viewer may keep it for the whole connection.
+async fn texture(State(shared): State<Arc<Shared>>, Path(index): Path<String>) -> Response {
+    let textures = shared.hub.geometry().textures.clone();
+    match index.parse::<usize>().ok().and_then(|i| textures.get(i)) {
+        Some(png) => ([(header::CONTENT_TYPE, "image/png")], png.clone()).into_response(),
+        None => {
+            let held = match textures.len() {
+                0 => "this scene has no textures".to_string(),
+                n => format!("this scene's are 0 to {}", n - 1),
+            };
+            (
+                StatusCode::NOT_FOUND,
+                format!("no texture '{index}': {held}\n"),
+            )
+                .into_response()
+        }
+    }
+}
+
 /// The current state as binary glTF, decoded from the same codes viewers hold.
 async fn scene_glb(State(shared): State<Arc<Shared>>) -> Response {
     let current = shared.hub.current();
-    let geometry = shared.hub.geometry().model.clone();
+    let served = shared.hub.geometry();
     let glb = tokio::task::spawn_blocking(move || {
         let radiosity: Vec<[f32; 3]> = current
             .colours
             .iter()
             .map(|&c| wire::decode_colour(c, current.scale))
             .collect();
-        wire::gltf::encode_glb(&geometry, &radiosity)
+        wire::gltf::encode_glb(&served.model, &served.textures, &radiosity)
     })
     .await;
     match glb {

@@ -177,7 +177,7 @@ export function encodeRequestFull() {
   return new Uint8Array([KIND.requestFull, 0]);
 }
 
-/** Decodes `/api/scene`: positions, patches (4 corners each), objects, camera. */
+/** Decodes `/api/scene`: positions, patches (4 corners each), objects, camera, textures (or null). */
 export function decodeGeometry(bytes) {
   const magic = "RCGEO1";
   for (let i = 0; i < magic.length; i++) {
@@ -217,6 +217,19 @@ export function decodeGeometry(bytes) {
   } else if (tag !== 0) {
     throw new Error(`camera tag ${tag} is neither 0 nor 1`);
   }
+  // Sections (u32 tag, u64 byte length, body) until the end; unknown tags are skipped.
+  let textures = null;
+  while (r.at < r.bytes.length) {
+    const sectionTag = r.u32("section tag");
+    const length = r.u64("section length");
+    if (length > BigInt(r.bytes.length - r.at)) throw new Error(`section ${sectionTag}: length ${length} exceeds the message`);
+    const end = r.at + Number(length);
+    if (sectionTag === TEXTURES_SECTION) {
+      if (textures) throw new Error("two texture sections");
+      textures = readTextures(r, count, end);
+    }
+    r.at = end;
+  }
   r.end();
   if (patchObjects.length !== patchCount) {
     throw new Error(`patch objects: expected ${patchCount}, got ${patchObjects.length}`);
@@ -228,7 +241,36 @@ export function decodeGeometry(bytes) {
     }
     if (patchObjects[p] >= objectCount) throw new Error(`patch ${p} refers to object ${patchObjects[p]} of ${objectCount}`);
   }
-  return { positions, patches, patchObjects, objects, camera };
+  if (textures) checkTextures(textures, patchCount, vertices);
+  return { positions, patches, patchObjects, objects, camera, textures };
+}
+
+/** Tag of the texture section; its textures are served as PNG at `api/textures/INDEX`. */
+const TEXTURES_SECTION = 1;
+/** A patch without a texture. */
+export const NO_TEXTURE = 0xffffffff;
+
+/** The texture section's body: means (linear RGB), a texture per patch, (u, v) per position. */
+function readTextures(r, count, end) {
+  const means = new Float32Array(3 * count("texture means", 12));
+  for (let i = 0; i < means.length; i++) means[i] = r.f32("texture mean");
+  const patchTextures = new Uint32Array(count("patch textures", 4));
+  for (let i = 0; i < patchTextures.length; i++) patchTextures[i] = r.u32("patch texture");
+  const uvs = new Float32Array(2 * count("texture coordinates", 8));
+  for (let i = 0; i < uvs.length; i++) uvs[i] = r.f32("texture coordinate");
+  if (r.at !== end) throw new Error(`texture section: ${end - r.at} bytes left over`);
+  return { means, patchTextures, uvs };
+}
+
+function checkTextures(t, patchCount, vertices) {
+  if (t.patchTextures.length !== patchCount) throw new Error(`patch textures: expected ${patchCount}, got ${t.patchTextures.length}`);
+  if (t.uvs.length !== 2 * vertices) throw new Error(`texture coordinates: expected ${vertices}, got ${t.uvs.length / 2}`);
+  if (!t.means.every((m) => Number.isFinite(m) && m >= 0)) throw new Error("a texture mean is not finite and >= 0");
+  const textureCount = t.means.length / 3;
+  t.patchTextures.forEach((texture, p) => {
+    if (texture !== NO_TEXTURE && texture >= textureCount) throw new Error(`patch ${p} refers to texture ${texture} of ${textureCount}`);
+  });
+  if (!t.uvs.every(Number.isFinite)) throw new Error("texture coordinates are not finite");
 }
 
 /** One RGB9E5 code times the frame scale: linear radiosity, W/m². */

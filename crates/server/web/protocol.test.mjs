@@ -14,7 +14,7 @@ import {
 const folder = join(dirname(fileURLToPath(import.meta.url)), "../../../tests/vectors");
 const expected = JSON.parse(readFileSync(join(folder, "expected.json"), "utf8"));
 const bytes = (name) => new Uint8Array(readFileSync(join(folder, `${name}.bin`)));
-const isGeometry = (name) => name === "geometry" || name === "geometry-no-camera";
+const isGeometry = (name) => name.startsWith("geometry") && name !== "geometry-changed";
 
 /** A decoded message in the shape of expected.json (u64s as decimal strings). */
 function describe(m) {
@@ -65,6 +65,11 @@ function describeGeometry(g) {
     camera: g.camera && {
       eye: g.camera.eye, target: g.camera.target, up: g.camera.up,
       vertical_fov_degrees: g.camera.verticalFovDegrees,
+    },
+    textures: g.textures && {
+      means: groups(g.textures.means, 3),
+      patch_textures: [...g.textures.patchTextures],
+      uvs: groups(g.textures.uvs, 2),
     },
   };
 }

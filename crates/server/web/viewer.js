@@ -1,8 +1,9 @@
 // The browser viewer: fetches the geometry once, follows the WebSocket stream with the
 // protocol decoder, and draws the vertex radiosity with WebGL2 the way the headless client
-// does (linear radiosity interpolated over fan triangles, Reinhard tone map per pixel, sRGB).
+// does (linear radiosity interpolated over fan triangles, textured patches times texel / mean
+// with the nearest texel, Reinhard tone map per pixel, sRGB).
 
-import { ColourBuffer, checksum, decodeColour, decodeGeometry, decodeServerMessage, encodeRequestFull } from "./protocol.js";
+import { ColourBuffer, NO_TEXTURE, checksum, decodeColour, decodeGeometry, decodeServerMessage, encodeRequestFull } from "./protocol.js";
 import { exposure, fanTriangles } from "./display.js";
 import { togglePanel } from "./control.js";
 
@@ -32,15 +33,25 @@ const state = {
 const VERTEX = `#version 300 es
 in vec3 position;
 in vec3 radiance;
+in vec2 uv;
 uniform mat4 viewProjection;
 out vec3 exposed;
-void main() { exposed = radiance; gl_Position = viewProjection * vec4(position, 1.0); }`;
+out vec2 textureAt;
+void main() { exposed = radiance; textureAt = uv; gl_Position = viewProjection * vec4(position, 1.0); }`;
 const FRAGMENT = `#version 300 es
 precision highp float;
 in vec3 exposed;
+in vec2 textureAt;
+uniform bool textured;
+uniform sampler2D image;
+uniform vec3 inverseMean;
 out vec4 colour;
 vec3 srgb(vec3 c) { return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c)); }
-void main() { vec3 x = max(exposed, 0.0); colour = vec4(srgb(x / (1.0 + x)), 1.0); }`;
+void main() {
+  vec3 x = max(exposed, 0.0);
+  if (textured) x *= texture(image, textureAt).rgb * inverseMean;
+  colour = vec4(srgb(x / (1.0 + x)), 1.0);
+}`;
 
 function shader(type, source) {
   const s = gl.createShader(type);
@@ -56,14 +67,60 @@ gl.attachShader(program, shader(gl.FRAGMENT_SHADER, FRAGMENT));
 gl.linkProgram(program);
 const positionBuffer = gl.createBuffer();
 const radianceBuffer = gl.createBuffer();
+const uvBuffer = gl.createBuffer();
 const indexBuffer = gl.createBuffer();
 let indexCount = 0;
+/** Runs of the index buffer drawn with one texture each: {texture (or NO_TEXTURE), first, count}. */
+let runs = [];
+/** The WebGL textures of the scene the page shows, loaded once per scene id. */
+const images = { sceneId: null, textures: [] };
+
+/** Loads `api/textures/I` for every texture the geometry names, as sRGB, nearest, repeating. */
+async function loadTextures(geometry, sceneId) {
+  if (images.sceneId === sceneId) return;
+  const count = geometry.textures ? geometry.textures.means.length / 3 : 0;
+  const loaded = [];
+  for (let i = 0; i < count; i++) {
+    // An <img> load, not createImageBitmap: headless Chromium's virtual time waits for it.
+    const image = new Image();
+    image.src = `api/textures/${i}`;
+    await image.decode().catch(() => { throw new Error(`texture ${i} (api/textures/${i}) could not be loaded`); });
+    const texture = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, texture);
+    // The texels as served: no colour-space conversion, no premultiplied alpha.
+    gl.pixelStorei(gl.UNPACK_COLORSPACE_CONVERSION_WEBGL, gl.NONE);
+    gl.pixelStorei(gl.UNPACK_PREMULTIPLY_ALPHA_WEBGL, false);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.SRGB8_ALPHA8, gl.RGBA, gl.UNSIGNED_BYTE, image);
+    for (const [name, value] of [[gl.TEXTURE_MIN_FILTER, gl.NEAREST], [gl.TEXTURE_MAG_FILTER, gl.NEAREST], [gl.TEXTURE_WRAP_S, gl.REPEAT], [gl.TEXTURE_WRAP_T, gl.REPEAT]]) {
+      gl.texParameteri(gl.TEXTURE_2D, name, value);
+    }
+    loaded.push(texture);
+  }
+  images.textures.forEach((t) => gl.deleteTexture(t));
+  Object.assign(images, { sceneId, textures: loaded });
+}
 
 function setGeometry(geometry) {
   state.geometry = geometry;
   gl.bindBuffer(gl.ARRAY_BUFFER, positionBuffer);
   gl.bufferData(gl.ARRAY_BUFFER, geometry.positions, gl.STATIC_DRAW);
-  const triangles = fanTriangles(geometry.patches);
+  gl.bindBuffer(gl.ARRAY_BUFFER, uvBuffer);
+  gl.bufferData(gl.ARRAY_BUFFER, geometry.textures ? geometry.textures.uvs : new Float32Array(2 * (geometry.positions.length / 3)), gl.STATIC_DRAW);
+  // Patches grouped by texture: one draw per texture.
+  const textureOf = (p) => (geometry.textures ? geometry.textures.patchTextures[p] : NO_TEXTURE);
+  const order = [...Array(geometry.patches.length / 4).keys()].sort((a, b) => textureOf(a) - textureOf(b));
+  const sorted = new Uint32Array(geometry.patches.length);
+  order.forEach((p, k) => sorted.set(geometry.patches.subarray(4 * p, 4 * p + 4), 4 * k));
+  const triangles = fanTriangles(sorted);
+  runs = [];
+  let at = 0;
+  order.forEach((p, k) => {
+    const count = 3 * (sorted[4 * k + 3] === 0xffffffff ? 1 : 2);
+    const last = runs[runs.length - 1];
+    if (last && last.texture === textureOf(p)) last.count += count;
+    else runs.push({ texture: textureOf(p), first: at, count });
+    at += count;
+  });
   gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, indexBuffer);
   gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, triangles, gl.STATIC_DRAW);
   indexCount = triangles.length;
@@ -174,16 +231,30 @@ function draw() {
   gl.enable(gl.DEPTH_TEST);
   gl.useProgram(program);
   gl.uniformMatrix4fv(gl.getUniformLocation(program, "viewProjection"), false, viewProjection(state.camera, width / height));
-  const attribute = (name, buffer) => {
+  const attribute = (name, buffer, size) => {
     const at = gl.getAttribLocation(program, name);
     gl.bindBuffer(gl.ARRAY_BUFFER, buffer);
     gl.enableVertexAttribArray(at);
-    gl.vertexAttribPointer(at, 3, gl.FLOAT, false, 0, 0);
+    gl.vertexAttribPointer(at, size, gl.FLOAT, false, 0, 0);
   };
-  attribute("position", positionBuffer);
-  attribute("radiance", radianceBuffer);
+  attribute("position", positionBuffer, 3);
+  attribute("radiance", radianceBuffer, 3);
+  attribute("uv", uvBuffer, 2);
   gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, indexBuffer);
-  gl.drawElements(gl.TRIANGLES, indexCount, gl.UNSIGNED_INT, 0);
+  const uniform = (name) => gl.getUniformLocation(program, name);
+  gl.uniform1i(uniform("image"), 0);
+  gl.activeTexture(gl.TEXTURE0);
+  for (const run of runs) {
+    const texture = run.texture === NO_TEXTURE ? undefined : images.textures[run.texture];
+    gl.uniform1i(uniform("textured"), texture ? 1 : 0);
+    if (texture) {
+      // texel / mean per channel, 0 where the mean is 0 (docs/PROTOCOL.md).
+      const mean = state.geometry.textures.means.subarray(3 * run.texture, 3 * run.texture + 3);
+      gl.uniform3fv(uniform("inverseMean"), mean.map((m) => (m > 0 ? 1 / m : 0)));
+      gl.bindTexture(gl.TEXTURE_2D, texture);
+    }
+    gl.drawElements(gl.TRIANGLES, run.count, gl.UNSIGNED_INT, 4 * run.first);
+  }
 }
 
 function showStatus() {
@@ -234,8 +305,10 @@ function connect() {
       state.bytes += bytes.length;
       const message = decodeServerMessage(bytes);
       if (message.kind === "hello" || message.kind === "geometry-changed") {
+        if (message.kind === "hello") state.sceneId = message.sceneId;
         if (state.geometryVersion !== message.geometryVersion) {
           const [geometry, version] = await fetchGeometry(message.geometryVersion);
+          await loadTextures(geometry, state.sceneId);
           setGeometry(geometry);
           state.geometryVersion = version;
         }

@@ -4,19 +4,23 @@
 //! - geometry: every triangle primitive of the default scene (else the first), placed by its
 //!   node's world transform; positions in the file's units (metres by the glTF spec);
 //! - reflectance: `baseColorFactor` times the mean of `baseColorTexture` over its texels, in
-//!   linear colour (sRGB texels decoded), at most [`MAX_REFLECTANCE`];
+//!   linear colour (sRGB texels decoded), at most [`MAX_REFLECTANCE`]; the texture itself, with
+//!   the primitive's `TEXCOORD_n` of that texture, is what viewers show over it;
 //! - emission, W/m²: π times `emissiveFactor` times `KHR_materials_emissive_strength` times the
 //!   mean of `emissiveTexture`, reading the product as radiance (W/(m²·sr)); a Lambertian
 //!   surface's exitance is π times its radiance;
 //! - objects: one per node with a mesh, named after the node (else its mesh, else `node<N>`),
 //!   made unique with `#2`, `#3`… as needed.
 //!
-//! A texture's mean stands for the whole surface (texture coordinates are not read). Points,
+//! A texture's mean stands for the whole surface in the solution; an emissive texture is not
+//! shown (its mean scales the emission); samplers are not read (viewers repeat). Points,
 //! lines and strips-of-lines primitives, and files whose external buffers or images are not
 //! regular files, are refused with the reason.
 
-use crate::scene::{MAX_COORDINATE, Material, Rgb, Scene, SceneError, check_scene_file};
-use crate::texture::{mean, srgb_to_linear};
+use crate::scene::{
+    MAX_COORDINATE, MAX_TEXTURE_COORDINATE, Material, Rgb, Scene, SceneError, check_scene_file,
+};
+use crate::texture::{Texture, mean, srgb_to_linear};
 use glam::{DMat4, DVec3};
 use std::collections::HashMap;
 use std::path::Path;
@@ -65,6 +69,8 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
         return Err(fail("the file has no scene".into()));
     };
     let mut scene = Scene::default();
+    // Image index -> index into `scene.textures`, for the base-colour images faces show.
+    let mut shown: HashMap<usize, u32> = HashMap::new();
     let mut names: HashMap<String, usize> = HashMap::new();
     let mut stack: Vec<(gltf::Node, DMat4)> = root.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
     while let Some((node, parent)) = stack.pop() {
@@ -123,9 +129,53 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
             }
             let material = material_of(&primitive.material(), &images)
                 .map_err(|reason| fail(format!("{at}: {reason}")))?;
+            let base_texture = primitive
+                .material()
+                .pbr_metallic_roughness()
+                .base_color_texture();
+            let mapped = match base_texture {
+                Some(info) => {
+                    let set = info.tex_coord();
+                    let uvs = reader.read_tex_coords(set).map(|t| {
+                        t.into_f32()
+                            .map(|uv| uv.map(f64::from))
+                            .collect::<Vec<[f64; 2]>>()
+                    });
+                    match uvs {
+                        Some(uvs) => {
+                            check_texture_coordinates(&uvs, positions.len()).map_err(|reason| {
+                                fail(format!("{at}: TEXCOORD_{set}: {reason}"))
+                            })?;
+                            let image = info.texture().source().index();
+                            let texture = match shown.get(&image) {
+                                Some(&texture) => texture,
+                                None => {
+                                    let texture = texture_of(&images[image]).map_err(|reason| {
+                                        fail(format!("{at}: image {image}: {reason}"))
+                                    })?;
+                                    scene.textures.push(texture);
+                                    let index = scene.textures.len() as u32 - 1;
+                                    shown.insert(image, index);
+                                    index
+                                }
+                            };
+                            Some((texture, uvs))
+                        }
+                        None => None,
+                    }
+                }
+                None => None,
+            };
             for triangle in indices.chunks_exact(3) {
                 let corners: Vec<DVec3> = triangle.iter().map(|&i| positions[i as usize]).collect();
-                scene.add_polygon(object, &corners, material);
+                match &mapped {
+                    Some((texture, uvs)) => {
+                        let uvs: Vec<[f64; 2]> =
+                            triangle.iter().map(|&i| uvs[i as usize]).collect();
+                        scene.add_textured_polygon(object, &corners, &uvs, material, *texture)
+                    }
+                    None => scene.add_polygon(object, &corners, material),
+                }
             }
         }
     }
@@ -161,9 +211,37 @@ fn material_of(
     converted.validate().map(|()| converted)
 }
 
-/// The mean colour of an image's texels, linear (8- and 16-bit channels sRGB-decoded, float
-/// channels as they are). Alpha is ignored; grey formats spread grey over r, g and b.
+/// Checks a primitive's texture coordinates: one per vertex, each finite within
+/// ±[`MAX_TEXTURE_COORDINATE`].
+fn check_texture_coordinates(uvs: &[[f64; 2]], vertices: usize) -> Result<(), String> {
+    if uvs.len() != vertices {
+        return Err(format!("{} coordinates for {vertices} vertices", uvs.len()));
+    }
+    match uvs
+        .iter()
+        .position(|uv| !uv.iter().all(|c| c.abs() <= MAX_TEXTURE_COORDINATE))
+    {
+        Some(bad) => Err(format!(
+            "vertex {bad} has {:?}, not finite within ±{MAX_TEXTURE_COORDINATE:e}",
+            uvs[bad]
+        )),
+        None => Ok(()),
+    }
+}
+
+/// The mean colour of an image's texels, linear (see [`linear_texels`]).
 fn linear_mean(image: &gltf::image::Data) -> Result<Rgb, String> {
+    mean(linear_texels(image))
+}
+
+/// An image as a texture viewers are shown.
+fn texture_of(image: &gltf::image::Data) -> Result<Texture, String> {
+    Texture::from_linear(image.width, image.height, linear_texels(image))
+}
+
+/// An image's texels, linear, row by row from the top (8- and 16-bit channels sRGB-decoded,
+/// float channels as they are). Alpha is ignored; grey formats spread grey over r, g and b.
+fn linear_texels(image: &gltf::image::Data) -> impl Iterator<Item = Rgb> + '_ {
     use gltf::image::Format;
     let (channels, bytes_per_channel) = match image.format {
         Format::R8 => (1, 1),
@@ -177,7 +255,7 @@ fn linear_mean(image: &gltf::image::Data) -> Result<Rgb, String> {
         Format::R32G32B32FLOAT => (3, 4),
         Format::R32G32B32A32FLOAT => (4, 4),
     };
-    let channel = |texel: &[u8], c: usize| -> f64 {
+    let channel = move |texel: &[u8], c: usize| -> f64 {
         let at = &texel[c * bytes_per_channel..(c + 1) * bytes_per_channel];
         match bytes_per_channel {
             1 => srgb_to_linear(f64::from(at[0]) / 255.0),
@@ -185,13 +263,11 @@ fn linear_mean(image: &gltf::image::Data) -> Result<Rgb, String> {
             _ => f64::from(f32::from_le_bytes([at[0], at[1], at[2], at[3]])),
         }
     };
-    mean(
-        image
-            .pixels
-            .chunks_exact(channels * bytes_per_channel)
-            .map(|texel| match channels {
-                1 | 2 => Rgb::splat(channel(texel, 0)),
-                _ => Rgb::new(channel(texel, 0), channel(texel, 1), channel(texel, 2)),
-            }),
-    )
+    image
+        .pixels
+        .chunks_exact(channels * bytes_per_channel)
+        .map(move |texel| match channels {
+            1 | 2 => Rgb::splat(channel(texel, 0)),
+            _ => Rgb::new(channel(texel, 0), channel(texel, 1), channel(texel, 2)),
+        })
 }

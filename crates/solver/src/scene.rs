@@ -2,6 +2,7 @@
 //! radiosity, loaded from Wavefront OBJ + MTL or built in code.
 
 use crate::geometry::Polygon;
+use crate::texture::{Texture, TextureMap};
 use glam::DVec3;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -97,6 +98,9 @@ pub struct Face {
     /// before contact lines cut them ([`crate::contact`]). Reference probes name these, so a
     /// reference holds however the faces are cut.
     pub source: u32,
+    /// Where the face's points fall in its texture, for a textured face (viewers show the
+    /// texture; the solver uses its mean, already in `reflectance`).
+    pub texture: Option<TextureMap>,
 }
 
 /// A suggested viewpoint, from a `#@view eye X Y Z target X Y Z up X Y Z fov DEGREES` line.
@@ -178,6 +182,8 @@ pub struct Scene {
     pub faces_cut_at_contacts: usize,
     /// [`Scene::triangle_count`] before contact lines cut faces (what it reports once any is).
     pub triangles_before_cuts: usize,
+    /// The textures faces refer to ([`Face::texture`]); empty for an untextured scene.
+    pub textures: Vec<Texture>,
 }
 
 /// A material's physical values.
@@ -204,6 +210,10 @@ impl Material {
 /// (RGB9E5 with a scale of at most 2^100); this leaves a million-fold headroom for reflections
 /// that multiply it (reflectance up to 0.999999), and is far past any real lamp.
 pub const MAX_EMISSION: f64 = 1e24;
+
+/// The largest texture coordinate accepted: a million repeats of a texture, far past any
+/// real model.
+pub const MAX_TEXTURE_COORDINATE: f64 = 1e6;
 
 /// The farthest a coordinate (or a move) may reach from the origin, scene units: what f32
 /// geometry holds with room for the differences and products viewers compute.
@@ -250,14 +260,64 @@ impl Scene {
     /// is its own source.
     pub fn add_polygon(&mut self, object: u32, corners: &[DVec3], material: Material) {
         for polygon in crate::contact::convex_polygons(corners) {
-            self.faces.push(Face {
-                polygon,
-                object,
-                reflectance: material.reflectance,
-                emission: material.emission,
-                source: self.faces.len() as u32,
-            });
+            self.push_face(object, polygon, material, None);
         }
+    }
+
+    /// [`Scene::add_polygon`] for a textured polygon: `uvs` are its corners' coordinates in
+    /// texture `texture` (glTF's convention, `v` down). A quad whose coordinates are not an
+    /// affine image of it is added as two triangles, so each face has one affine map.
+    pub fn add_textured_polygon(
+        &mut self,
+        object: u32,
+        corners: &[DVec3],
+        uvs: &[[f64; 2]],
+        material: Material,
+        texture: u32,
+    ) {
+        let uv_of = |p: DVec3| uvs[corners.iter().position(|c| *c == p).unwrap_or(0)];
+        for polygon in crate::contact::convex_polygons(corners) {
+            let c = polygon.corners();
+            let map = TextureMap::of_triangle(
+                texture,
+                [c[0], c[1], c[2]],
+                [0, 1, 2].map(|k| uv_of(c[k])),
+            );
+            let affine = |map: &TextureMap| {
+                c.iter().all(|&p| {
+                    let (want, got) = (uv_of(p), map.uv_at(p));
+                    (want[0] - got[0]).abs().max((want[1] - got[1]).abs())
+                        <= 1e-6 * (1.0 + want[0].abs().max(want[1].abs()))
+                })
+            };
+            match map {
+                Some(map) if !affine(&map) => {
+                    for triangle in [[c[0], c[1], c[2]], [c[0], c[2], c[3]]] {
+                        let map = TextureMap::of_triangle(texture, triangle, triangle.map(uv_of));
+                        let [a, b, d] = triangle;
+                        self.push_face(object, Polygon::triangle(a, b, d), material, map);
+                    }
+                }
+                map => self.push_face(object, polygon, material, map),
+            }
+        }
+    }
+
+    fn push_face(
+        &mut self,
+        object: u32,
+        polygon: Polygon,
+        material: Material,
+        texture: Option<TextureMap>,
+    ) {
+        self.faces.push(Face {
+            polygon,
+            object,
+            reflectance: material.reflectance,
+            emission: material.emission,
+            source: self.faces.len() as u32,
+            texture,
+        });
     }
 
     /// The axis-aligned box around every face, or `None` for a scene without faces.
@@ -318,6 +378,7 @@ impl Scene {
                 [a, b, c, d] => Polygon::quad(a, b, c, d),
                 _ => unreachable!("polygons have three or four corners"),
             };
+            face.texture = face.texture.as_ref().map(|map| map.scaled(factor));
         }
         scaled
     }
@@ -326,6 +387,7 @@ impl Scene {
     pub fn translate_object(&mut self, object: u32, offset: DVec3) {
         for face in self.faces.iter_mut().filter(|f| f.object == object) {
             face.polygon = face.polygon.translated(offset);
+            face.texture = face.texture.as_ref().map(|map| map.translated(offset));
         }
     }
 
@@ -379,7 +441,8 @@ impl Scene {
         let mtl_path = first_mtllib(&text)
             .map(|m| folder.join(m))
             .unwrap_or_else(|| path.into());
-        let checked: Vec<Material> = materials
+        let mut textures: Vec<(PathBuf, Texture)> = Vec::new();
+        let checked: Vec<(Material, Option<u32>)> = materials
             .iter()
             .map(|m| {
                 let rgb = |c: Option<[f32; 3]>, absent: Rgb| {
@@ -393,13 +456,20 @@ impl Scene {
                     .and_then(|t| t.split_whitespace().last())
                 {
                     Some(name) => {
-                        let folder = mtl_path.parent().unwrap_or(Path::new("."));
-                        Some(crate::texture::file_mean(&folder.join(name))?)
+                        let file = mtl_path.parent().unwrap_or(Path::new(".")).join(name);
+                        let index = match textures.iter().position(|(path, _)| *path == file) {
+                            Some(index) => index,
+                            None => {
+                                textures.push((file.clone(), Texture::load(&file)?));
+                                textures.len() - 1
+                            }
+                        };
+                        Some(index as u32)
                     }
                     None => None,
                 };
                 let reflectance = match texture {
-                    Some(mean) => rgb(m.diffuse, Rgb::ONE) * mean,
+                    Some(index) => rgb(m.diffuse, Rgb::ONE) * textures[index as usize].1.mean,
                     None => rgb(m.diffuse, Rgb::ZERO),
                 };
                 let material = Material {
@@ -408,7 +478,7 @@ impl Scene {
                 };
                 material
                     .validate()
-                    .map(|()| material)
+                    .map(|()| (material, texture))
                     .map_err(|reason| SceneError::Material {
                         path: mtl_path.clone(),
                         material: m.name.clone(),
@@ -419,6 +489,7 @@ impl Scene {
 
         let mut scene = Scene {
             view: find_view(path, &text)?,
+            textures: textures.into_iter().map(|(_, texture)| texture).collect(),
             ..Scene::default()
         };
         let mut object_ids: HashMap<String, u32> = HashMap::new();
@@ -427,7 +498,7 @@ impl Scene {
             if mesh.indices.is_empty() {
                 continue;
             }
-            let Some(material) = mesh.material_id.map(|id| checked[id]) else {
+            let Some((material, texture)) = mesh.material_id.map(|id| checked[id]) else {
                 return Err(SceneError::NoMaterial {
                     path: path.into(),
                     object: model.name.clone(),
@@ -446,13 +517,23 @@ impl Scene {
             } else {
                 mesh.face_arities.clone()
             };
+            // OBJ's `vt` has v up from the image's bottom row; the scene keeps glTF's v down.
+            let uv = |i: u32| {
+                let t = &mesh.texcoords[2 * i as usize..2 * i as usize + 2];
+                [f64::from(t[0]), 1.0 - f64::from(t[1])]
+            };
+            let mapped = texture.filter(|_| mesh.texcoords.len() == mesh.positions.len() / 3 * 2);
             for arity in arities {
-                let corners: Vec<DVec3> = mesh.indices[start..start + arity as usize]
-                    .iter()
-                    .map(|&i| position(i))
-                    .collect();
+                let indices = &mesh.indices[start..start + arity as usize];
+                let corners: Vec<DVec3> = indices.iter().map(|&i| position(i)).collect();
                 start += arity as usize;
-                scene.add_polygon(object, &corners, material);
+                match mapped {
+                    Some(texture) => {
+                        let uvs: Vec<[f64; 2]> = indices.iter().map(|&i| uv(i)).collect();
+                        scene.add_textured_polygon(object, &corners, &uvs, material, texture)
+                    }
+                    None => scene.add_polygon(object, &corners, material),
+                }
             }
         }
         scene.finish(path)
@@ -606,7 +687,7 @@ fn lint_obj(
             reason,
         })
     };
-    let mut vertex_count: i64 = 0;
+    let (mut vertex_count, mut texture_coordinate_count): (i64, i64) = (0, 0);
     for (number, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
         match words.next() {
@@ -626,8 +707,43 @@ fn lint_obj(
                     }
                 }
             }
+            Some("vt") => {
+                texture_coordinate_count += 1;
+                for word in words.take(2) {
+                    match word.parse::<f64>() {
+                        Ok(x) if x.abs() <= MAX_TEXTURE_COORDINATE => {}
+                        _ => {
+                            return fail(
+                                number,
+                                format!(
+                                    "texture coordinate {texture_coordinate_count} has '{word}', which is not a finite number within ±{MAX_TEXTURE_COORDINATE:e}"
+                                ),
+                            );
+                        }
+                    }
+                }
+            }
             Some("f") => {
                 for word in words {
+                    if let Some(Ok(index)) = word
+                        .split('/')
+                        .nth(1)
+                        .filter(|t| !t.is_empty())
+                        .map(str::parse::<i64>)
+                    {
+                        let resolved = match index < 0 {
+                            true => texture_coordinate_count + 1 + index,
+                            false => index,
+                        };
+                        if resolved < 1 || resolved > texture_coordinate_count {
+                            return fail(
+                                number,
+                                format!(
+                                    "face refers to texture coordinate {index}, but only {texture_coordinate_count} are defined before it"
+                                ),
+                            );
+                        }
+                    }
                     let index_text = word.split('/').next().unwrap_or_default();
                     let Ok(index) = index_text.parse::<i64>() else {
                         return fail(number, format!("face vertex '{word}' is not an index"));

@@ -224,6 +224,7 @@ fn geometry_round_trips_and_bad_geometry_is_refused() {
             up: [0.0, 1.0, 0.0],
             vertical_fov_degrees: 40.0,
         }),
+        textures: None,
     };
     let bytes = geometry.encode();
     assert_eq!(Geometry::decode(&bytes), Ok(geometry.clone()));

@@ -23,11 +23,12 @@ fn glb_structure_matches_the_specification() {
         patch_objects: vec![0, 1],
         objects: vec!["floor".into(), "a \"quoted\" lamp".into()],
         camera: None,
+        textures: None,
     };
     // One radiosity per vertex: the floor's four, then the lamp's three.
     let mut radiosity = vec![[0.5, 0.4, 0.3]; 4];
     radiosity.extend([[20.0, 20.0, 20.0]; 3]);
-    let glb = wire::gltf::encode_glb(&geometry, &radiosity);
+    let glb = wire::gltf::encode_glb(&geometry, &[] as &[&[u8]], &radiosity);
     assert_eq!(&glb[0..4], b"glTF");
     assert_eq!(word(&glb, 4), 2);
     assert_eq!(word(&glb, 8) as usize, glb.len());

@@ -73,6 +73,9 @@ fn describe_geometry(g: &Geometry) -> Value {
             "eye": c.eye, "target": c.target, "up": c.up,
             "vertical_fov_degrees": c.vertical_fov_degrees,
         })),
+        "textures": g.textures.as_ref().map(|t| json!({
+            "means": t.means, "patch_textures": t.patch_textures, "uvs": t.uvs,
+        })),
     })
 }
 
@@ -162,6 +165,7 @@ fn vectors() -> Vec<(&'static str, Vec<u8>, Value)> {
             up: [0.0, 1.0, 0.0],
             vertical_fov_degrees: 39.3,
         }),
+        textures: None,
     };
     out.push(("geometry", geometry.encode(), describe_geometry(&geometry)));
     let bare = Geometry {
@@ -172,6 +176,29 @@ fn vectors() -> Vec<(&'static str, Vec<u8>, Value)> {
         "geometry-no-camera",
         bare.encode(),
         describe_geometry(&bare),
+    ));
+    let textured = Geometry {
+        textures: Some(geometry::SurfaceTextures {
+            means: vec![[0.25, 0.5, 0.125]],
+            patch_textures: vec![0, geometry::NO_TEXTURE],
+            uvs: vec![[0.0, 1.0], [2.0, 1.0], [2.0, -1.0], [0.0, -1.0]],
+        }),
+        ..bare.clone()
+    };
+    out.push((
+        "geometry-textured",
+        textured.encode(),
+        describe_geometry(&textured),
+    ));
+    // A section this version does not know (tag 99) is skipped.
+    let mut unknown = textured.encode();
+    unknown.extend(99u32.to_le_bytes());
+    unknown.extend(3u64.to_le_bytes());
+    unknown.extend([1, 2, 3]);
+    out.push((
+        "geometry-unknown-section",
+        unknown,
+        describe_geometry(&textured),
     ));
     out.push((
         "request-full",
@@ -205,6 +232,16 @@ fn vectors() -> Vec<(&'static str, Vec<u8>, Value)> {
     let last = geometry_bad.len() - 1 - 40; // the camera tag
     geometry_bad[last] = 7;
     refused.push(("refused-geometry-camera-tag", geometry_bad));
+    let textured = bytes("geometry-textured");
+    refused.push((
+        "refused-geometry-section-truncated",
+        textured[..textured.len() - 1].to_vec(),
+    ));
+    let mut foreign_texture = textured.clone();
+    // The first patch's texture index: before the uvs (u64 count, 4 × 8 bytes) and patch 1's.
+    let patch_texture = textured.len() - 4 * 8 - 8 - 4 - 4;
+    foreign_texture[patch_texture..patch_texture + 4].copy_from_slice(&1u32.to_le_bytes());
+    refused.push(("refused-geometry-texture-out-of-range", foreign_texture));
     out.extend(
         refused
             .into_iter()
@@ -215,7 +252,7 @@ fn vectors() -> Vec<(&'static str, Vec<u8>, Value)> {
 
 /// Vectors decoded as `/api/scene` geometry rather than as WebSocket messages.
 fn is_geometry(name: &str) -> bool {
-    matches!(name, "geometry" | "geometry-no-camera")
+    name.starts_with("geometry") && name != "geometry-changed"
 }
 
 #[test]

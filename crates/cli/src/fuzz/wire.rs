@@ -78,6 +78,7 @@ impl Default for WireTarget {
             patch_objects: (0..VERTICES - 3).map(|i| i % 2).collect(),
             objects: vec!["floor".into(), "light".into()],
             camera: None,
+            textures: None,
         };
         let mut corpus: Vec<Vec<u8>> = messages.iter().map(ServerMessage::encode).collect();
         corpus.push(geometry.encode());

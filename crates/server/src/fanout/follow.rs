@@ -5,11 +5,12 @@
 use super::edge::{Edge, Served, upstream};
 use super::{
     RECORD_SUFFIX, SceneRecord, Tag, Upstream, full_object, geometry_object, header, headers,
-    record_object,
+    record_object, texture_object,
 };
 use crate::Shared;
 use crate::hub::{GeometryState, Hub, Published};
 use async_nats::jetstream::object_store;
+use bytes::Bytes;
 use futures_util::StreamExt;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -58,9 +59,18 @@ async fn read_geometry(
 ) -> anyhow::Result<(Tag, GeometryState)> {
     let (tag, bytes) = read_object(objects, &geometry_object(scene)).await?;
     let geometry = Geometry::decode(&bytes)?;
+    let texture_count = geometry.textures.as_ref().map_or(0, |t| t.means.len());
+    let mut textures = Vec::with_capacity(texture_count);
+    for index in 0..texture_count {
+        let (texture_tag, png) = read_object(objects, &texture_object(scene, index)).await?;
+        if texture_tag.run != tag.run {
+            anyhow::bail!("the textures of '{scene}' are being replaced");
+        }
+        textures.push(Bytes::from(png));
+    }
     Ok((
         tag.clone(),
-        GeometryState::new(tag.scene_id, tag.version, geometry),
+        GeometryState::new(tag.scene_id, tag.version, geometry, textures.into()),
     ))
 }
 

@@ -8,7 +8,9 @@
 //! - object store `radcast-snapshots` (JetStream), objects `S.geometry` and `S.full`: the
 //!   newest geometry (stored before the frames that need it) and full frame (stored right
 //!   after its frame is announced; before it when the frame is too big for one message), so an
-//!   edge that starts late (or missed a message) is served at once without asking the origin; and
+//!   edge that starts late (or missed a message) is served at once without asking the origin;
+//!   `S.texture.I`, the PNG of texture I of a textured scene (stored once per run, before the
+//!   first geometry); and
 //!   `S.record`, the [`SceneRecord`] (report, emissions, health), by which edges discover
 //!   scenes (they watch the bucket). One object store, not a key-value bucket too: async-nats
 //!   0.51 cannot create a bucket on nats-server 2.9 (it misreads the account info).
@@ -90,6 +92,11 @@ pub fn control_subject(scene: &str) -> String {
 /// The object holding a scene's newest encoded geometry.
 pub fn geometry_object(scene: &str) -> String {
     format!("{scene}.geometry")
+}
+
+/// The object holding the PNG of texture `index` of a scene.
+pub fn texture_object(scene: &str, index: usize) -> String {
+    format!("{scene}.texture.{index}")
 }
 
 /// The object holding a scene's newest encoded full frame.

@@ -4,7 +4,7 @@
 
 use super::{
     Nats, SceneRecord, Tag, alive_subject, control_subject, frame_subject, full_object,
-    geometry_object, header, headers, record_object, record_subject,
+    geometry_object, header, headers, record_object, record_subject, texture_object,
 };
 use crate::Shared;
 use crate::control::{Field, Reply};
@@ -90,6 +90,18 @@ async fn publish_newest(
         geometry_version: geometry.version,
     };
     let held = sent.as_ref().map(|s| (s.version, s.geometry_version));
+    if held.is_none() {
+        // Textures never change within a run: stored once, before any geometry naming them.
+        for (index, png) in geometry.textures.iter().enumerate() {
+            put(
+                objects,
+                &texture_object(scene, index),
+                tag(geometry.version),
+                png,
+            )
+            .await?;
+        }
+    }
     if held.map(|(_, g)| g) != Some(geometry.version) {
         put(
             objects,
