@@ -3,7 +3,7 @@
 //! agrees with the headless client's at the same camera and size. `.ci/run` installs Chromium
 //! when it is missing; without it this test says so and skips.
 
-use client::render::{TextureImage, View, render};
+use client::render::{Model, TextureImage, View, render};
 use server::prepared::{prepare, shared_for};
 use server::{Limits, listen, solving};
 use solver::{PatchTarget, SolveRequest};
@@ -131,14 +131,20 @@ async fn compare_page_with_client(scene: &std::path::Path) {
     buffer
         .apply(&wire::ServerMessage::decode(&current.full).unwrap())
         .unwrap();
-    let expected = render(
-        &geometry,
-        &textures,
-        &buffer,
-        &View::for_scene(&geometry),
-        width,
-        height,
-    );
+    let emitting = shared
+        .emissions
+        .lock()
+        .unwrap()
+        .iter()
+        .map(|(_, e)| e.iter().any(|c| *c > 0.0))
+        .collect();
+    let view = View::for_scene(&geometry);
+    let model = Model {
+        geometry: (*geometry).clone(),
+        textures,
+        emitting,
+    };
+    let expected = render(&model, &buffer, &view, width, height);
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
     let mut reader = decoder.read_info().unwrap();
     let mut pixels = vec![0; reader.output_buffer_size().unwrap()];

@@ -59,11 +59,16 @@ impl Drop for Origin {
 }
 
 async fn origin(url: &str, name: &str) -> Origin {
+    origin_of(url, name, "scenes/cornell-box.obj").await
+}
+
+/// An origin serving `scene` as `name`.
+async fn origin_of(url: &str, name: &str, scene: &str) -> Origin {
     let request = SolveRequest {
         patches: PatchTarget::Count(300),
         ..SolveRequest::default()
     };
-    let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).expect("scene loads");
+    let prepared = prepare(scene.as_ref(), request).expect("scene loads");
     let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let address = listener.local_addr().unwrap();
@@ -372,12 +377,22 @@ async fn one_edge_serves_every_scene_published_each_under_its_name() {
     };
     let names = ["test-several-a", "test-several-b"];
     let edge = edge(&nats, None).await;
-    let origins = [origin(&nats, names[0]).await, origin(&nats, names[1]).await];
+    // The second has textures: the edge serves them from the object store, byte for byte.
+    let origins = [
+        origin(&nats, names[0]).await,
+        origin_of(&nats, names[1], "scenes/tiled-cornell-box.obj").await,
+    ];
     for (origin, name) in origins.iter().zip(names) {
         let (version, checksum) = origin_final(origin).await;
         let served = edge.edge.serving(name, &origin.run).await;
         final_state(&served, version, checksum).await;
-        for path in ["/api/solution", "/api/scene"] {
+        for path in [
+            "/api/solution",
+            "/api/scene",
+            "/api/scene.glb",
+            "/api/textures/0",
+            "/api/textures/1",
+        ] {
             let on_edge = get(edge.address, &format!("/scenes/{name}{path}")).await;
             assert_eq!(on_edge, get(origin.address, path).await, "{name}{path}");
         }

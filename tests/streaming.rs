@@ -397,17 +397,27 @@ async fn the_rendered_cornell_box_has_red_left_and_green_right() {
         .await
         .expect("final frame");
     let base = client::http_base(&url).unwrap();
-    let geometry = tokio::task::spawn_blocking(move || client::fetch_geometry(&base))
+    let model = tokio::task::spawn_blocking(move || client::fetch_scene(&base))
         .await
         .unwrap()
         .unwrap();
-    let view = client::render::View::for_scene(&geometry);
+    assert_eq!(
+        model.emitting,
+        model
+            .geometry
+            .objects
+            .iter()
+            .map(|o| o == "light")
+            .collect::<Vec<_>>(),
+        "only the light emits"
+    );
+    let view = client::render::View::for_scene(&model.geometry);
     assert_eq!(
         view.eye.to_array(),
         [278.0, 273.0, -800.0],
         "the published Cornell camera"
     );
-    let image = client::render::render(&geometry, &[], &outcome.buffer, &view, 128, 128);
+    let image = client::render::render(&model, &outcome.buffer, &view, 128, 128);
     let mean = |x0: u32, x1: u32| {
         let mut sum = [0.0f64; 3];
         for y in 40..88 {

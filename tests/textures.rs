@@ -33,7 +33,9 @@ async fn textures_travel_with_the_geometry_and_are_served_once_as_png() {
         .unwrap();
 
     let base = format!("http://{address}");
-    let (geometry, textures) = tokio::task::spawn_blocking(move || client::fetch_scene(&base))
+    let client::render::Model {
+        geometry, textures, ..
+    } = tokio::task::spawn_blocking(move || client::fetch_scene(&base))
         .await
         .unwrap()
         .unwrap();

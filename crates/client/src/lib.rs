@@ -54,11 +54,34 @@ pub fn fetch_textures(
         .collect()
 }
 
-/// The geometry and its textures: what a viewer draws.
-pub fn fetch_scene(base: &str) -> anyhow::Result<(wire::Geometry, Vec<render::TextureImage>)> {
+/// The geometry, its textures and which objects emit now: what a viewer draws on.
+pub fn fetch_scene(base: &str) -> anyhow::Result<render::Model> {
     let geometry = fetch_geometry(base)?;
     let textures = fetch_textures(base, &geometry)?;
-    Ok((geometry, textures))
+    let url = format!("{base}/api/objects");
+    let objects: Vec<ObjectEmission> = serde_json::from_slice(&http_get(&url, 1 << 26)?)
+        .with_context(|| format!("{url} is not a list of objects and emissions"))?;
+    let emitting = geometry
+        .objects
+        .iter()
+        .map(|name| {
+            objects
+                .iter()
+                .any(|o| o.name == *name && o.emission.iter().any(|c| *c > 0.0))
+        })
+        .collect();
+    Ok(render::Model {
+        geometry,
+        textures,
+        emitting,
+    })
+}
+
+/// One entry of `/api/objects`.
+#[derive(serde::Deserialize)]
+struct ObjectEmission {
+    name: String,
+    emission: [f64; 3],
 }
 
 /// `/metrics` as text.

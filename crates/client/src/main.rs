@@ -411,15 +411,12 @@ async fn watch(
                         data.len(),
                         if info.is_final { ", final" } else { "" }
                     );
-                    if let (Some(dir), Some((geometry, textures)), true) =
-                        (&out_dir, &geometry, info.is_final)
-                    {
+                    if let (Some(dir), Some(model), true) = (&out_dir, &geometry, info.is_final) {
                         let path = dir.join(format!("version-{:06}.png", info.solution_version));
                         render(
-                            geometry,
-                            textures,
+                            model,
                             viewer.buffer(),
-                            &View::for_scene(geometry),
+                            &View::for_scene(&model.geometry),
                             512,
                             512,
                         )
@@ -466,7 +463,7 @@ async fn view(
     let limit = Duration::try_from_secs_f64(timeout)
         .context("--timeout must be a positive number of seconds")?;
     let base = http_base(&urls[0])?;
-    let (geometry, textures) = {
+    let model = {
         let base = base.clone();
         tokio::task::spawn_blocking(move || fetch_scene(&base)).await??
     };
@@ -486,17 +483,17 @@ async fn view(
     };
     let expected = solution.checksum;
     let cameras = if cameras.is_empty() {
-        vec![View::for_scene(&geometry)]
+        vec![View::for_scene(&model.geometry)]
     } else {
         cameras
     };
     let mut mismatched = 0;
     for (v, outcome) in outcomes.iter().enumerate() {
-        if outcome.buffer.colours.len() != geometry.positions.len() {
+        if outcome.buffer.colours.len() != model.geometry.positions.len() {
             bail!(
                 "viewer {v}: {} colours, but the geometry has {} vertices",
                 outcome.buffer.colours.len(),
-                geometry.positions.len()
+                model.geometry.positions.len()
             );
         }
         let checksum = wire::checksum(&outcome.buffer.colours);
@@ -515,7 +512,7 @@ async fn view(
         );
         for (c, view) in cameras.iter().enumerate() {
             let path = output_path(&out, v, clients, c, cameras.len());
-            render(&geometry, &textures, &outcome.buffer, view, width, height).write_png(&path)?;
+            render(&model, &outcome.buffer, view, width, height).write_png(&path)?;
             say!("  wrote {}", path.display());
         }
     }

@@ -167,6 +167,28 @@ impl TextureImage {
     }
 }
 
+/// What a viewer draws the colours on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Model {
+    /// The geometry from `/api/scene`.
+    pub geometry: Geometry,
+    /// The texels of each texture its texture section names.
+    pub textures: Vec<TextureImage>,
+    /// Per object, whether it emits (`/api/objects`): emitters are left out of the exposure.
+    pub emitting: Vec<bool>,
+}
+
+impl Model {
+    /// `geometry` alone: no textures, no object known to emit.
+    pub fn plain(geometry: Geometry) -> Model {
+        Model {
+            geometry,
+            textures: Vec::new(),
+            emitting: Vec::new(),
+        }
+    }
+}
+
 /// A corner as the rasterizer carries it: camera-space position, radiosity, texture coordinates.
 #[derive(Clone, Copy)]
 struct Corner {
@@ -179,19 +201,17 @@ struct Corner {
 /// is 0), or none.
 type Shading<'a> = Option<(&'a TextureImage, Vec3)>;
 
-/// Renders the patches from `view`, each textured patch showing texture `textures[i]` as the
-/// geometry's texture section says; both sides of every face are drawn.
-pub fn render(
-    geometry: &Geometry,
-    textures: &[TextureImage],
-    buffer: &ColourBuffer,
-    view: &View,
-    width: u32,
-    height: u32,
-) -> Image {
+/// Renders the patches from `view`, each textured patch showing its texture as the geometry's
+/// texture section says; both sides of every face are drawn.
+pub fn render(model: &Model, buffer: &ColourBuffer, view: &View, width: u32, height: u32) -> Image {
+    let Model {
+        geometry,
+        textures,
+        emitting,
+    } = model;
     let radiosity = buffer.radiosity();
     let colours: Vec<Vec3> = radiosity.iter().map(|&rgb| Vec3::from(rgb)).collect();
-    let k = exposure(geometry, &radiosity);
+    let k = exposure(geometry, &radiosity, emitting);
     let camera = Camera::new(view, geometry, width, height);
     let mut inverse_depth = vec![0.0f32; (width * height) as usize];
     let mut linear = vec![Vec3::ZERO; (width * height) as usize];
@@ -410,7 +430,12 @@ mod tests {
             .apply(&ServerMessage::Full(FullFrame { info, colours }))
             .unwrap();
         let view = View::parse("0,0,-5,0,0,0,0,1,0,30").unwrap();
-        let image = render(&geometry, &[checker], &buffer, &view, 64, 64);
+        let textured = Model {
+            geometry: geometry.clone(),
+            textures: vec![checker],
+            emitting: vec![false],
+        };
+        let image = render(&textured, &buffer, &view, 64, 64);
         // Exposure 0.18 / 1 (every vertex at luminance 1); a white texel shows 1 / 0.5 of it.
         let lit = srgb_byte(tone_map([2.0; 3], 0.18)[0]);
         // Seen from -z, the image's left is the square's +x: its top-left quarter shows the
@@ -420,7 +445,7 @@ mod tests {
         assert_eq!(image.pixel(16, 48), [lit; 3]);
         assert_eq!(image.pixel(48, 48), [0; 3]);
         // Without its texture the square shows the light itself.
-        let plain = render(&geometry, &[], &buffer, &view, 64, 64);
+        let plain = render(&Model::plain(geometry), &buffer, &view, 64, 64);
         assert_eq!(
             plain.pixel(16, 16),
             [srgb_byte(tone_map([0.18; 3], 1.0)[0]); 3]

@@ -82,19 +82,29 @@ async fn texture(State(shared): State<Arc<Shared>>, Path(index): Path<String>) -
 async fn scene_glb(State(shared): State<Arc<Shared>>) -> Response {
     let current = shared.hub.current();
     let served = shared.hub.geometry();
+    let emitting = emitting_objects(&shared);
     let glb = tokio::task::spawn_blocking(move || {
         let radiosity: Vec<[f32; 3]> = current
             .colours
             .iter()
             .map(|&c| wire::decode_colour(c, current.scale))
             .collect();
-        wire::gltf::encode_glb(&served.model, &served.textures, &radiosity)
+        wire::gltf::encode_glb(&served.model, &served.textures, &emitting, &radiosity)
     })
     .await;
     match glb {
         Ok(bytes) => ([(header::CONTENT_TYPE, "model/gltf-binary")], bytes).into_response(),
         Err(_) => (StatusCode::INTERNAL_SERVER_ERROR, "glTF export failed\n").into_response(),
     }
+}
+
+/// Per object in scene order, whether it emits now (what `/api/objects` reports).
+fn emitting_objects(shared: &Shared) -> Vec<bool> {
+    let emissions = shared.emissions.lock().expect("emissions lock");
+    emissions
+        .iter()
+        .map(|(_, e)| e.iter().any(|c| *c > 0.0))
+        .collect()
 }
 
 /// The current summary, for `/api/solution` and tests: every field read from one published

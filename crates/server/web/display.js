@@ -1,7 +1,8 @@
 // How vertex radiosity becomes displayed colour, as crates/wire/src/display.rs does it (the
 // headless client and the glTF export): fan triangles per patch, exposure 0.18 / Lavg with
-// Lavg the area-weighted geometric mean of vertex luminance (Reinhard et al. 2002), each
-// channel x / (1 + x), then sRGB.
+// Lavg the area-weighted geometric mean of vertex luminance over the patches of objects that do
+// not emit (all when every object emits; Reinhard et al. 2002), each channel x / (1 + x), then
+// sRGB.
 
 /** The corners a patch uses: three for a triangle (4th = 0xFFFFFFFF), else four. */
 export function cornerCount(patches, p) {
@@ -33,8 +34,11 @@ function patchArea(positions, patches, p) {
 
 const luminance = (r, g, b) => 0.2126 * r + 0.7152 * g + 0.0722 * b;
 
-/** Exposure 0.18 / Lavg (1 for a black scene); `radiosity` holds r, g, b per vertex. */
-export function exposure(positions, patches, radiosity) {
+/**
+ * Exposure 0.18 / Lavg (1 for a black scene); `radiosity` holds r, g, b per vertex, `emitting[o]`
+ * whether object o emits (patches of emitting objects are left out unless all are).
+ */
+export function exposure(positions, patches, radiosity, patchObjects, emitting) {
   let brightest = 0;
   for (let v = 0; v < radiosity.length / 3; v++) {
     brightest = Math.max(brightest, luminance(radiosity[3 * v], radiosity[3 * v + 1], radiosity[3 * v + 2]));
@@ -44,7 +48,11 @@ export function exposure(positions, patches, radiosity) {
   const floor = 1e-4 * brightest;
   let logSum = 0;
   let areaSum = 0;
+  const emits = (p) => Boolean(emitting[patchObjects[p]]);
+  let litOnly = false;
+  for (let p = 0; p < patches.length / 4 && !litOnly; p++) litOnly = !emits(p);
   for (let p = 0; p < patches.length / 4; p++) {
+    if (litOnly && emits(p)) continue;
     const n = cornerCount(patches, p);
     const share = patchArea(positions, patches, p) / n;
     for (let k = 0; k < n; k++) {

@@ -28,6 +28,7 @@ const state = {
   serverChecksum: null,
   connected: false,
   camera: null, // {target, offset (eye - target), up, fov, radius}
+  emitting: [], // per object of the geometry: whether it emits now (left out of the exposure)
 };
 
 const VERTEX = `#version 300 es
@@ -211,7 +212,7 @@ function uploadColours() {
   if (!geometry || !buffer.info || buffer.colours.length !== geometry.positions.length / 3) return;
   const radiosity = new Float32Array(buffer.colours.length * 3);
   buffer.colours.forEach((code, v) => radiosity.set(decodeColour(code, buffer.info.scale), 3 * v));
-  const k = exposure(geometry.positions, geometry.patches, radiosity) * 2 ** Number(exposureInput.value);
+  const k = exposure(geometry.positions, geometry.patches, radiosity, geometry.patchObjects, state.emitting) * 2 ** Number(exposureInput.value);
   for (let i = 0; i < radiosity.length; i++) radiosity[i] *= k;
   gl.bindBuffer(gl.ARRAY_BUFFER, radianceBuffer);
   gl.bufferData(gl.ARRAY_BUFFER, radiosity, gl.DYNAMIC_DRAW);
@@ -286,7 +287,18 @@ async function fetchGeometry(version) {
   }
 }
 
+/** Which objects emit now (`api/objects`), by the geometry's object order; true if it changed. */
+async function fetchEmitting() {
+  const objects = await (await fetch("api/objects")).json();
+  const emits = new Map(objects.map((o) => [o.name, o.emission.some((c) => c > 0)]));
+  const emitting = state.geometry ? state.geometry.objects.map((name) => emits.get(name) === true) : [];
+  const changed = emitting.join() !== state.emitting.join();
+  state.emitting = emitting;
+  return changed;
+}
+
 async function checkWithServer() {
+  if (await fetchEmitting()) uploadColours();
   const summary = await (await fetch("api/solution")).json();
   state.serverChecksum = state.buffer.info && BigInt(summary.solution_version) === state.buffer.info.solutionVersion ? summary.checksum : null;
   showStatus();
@@ -310,6 +322,7 @@ function connect() {
           const [geometry, version] = await fetchGeometry(message.geometryVersion);
           await loadTextures(geometry, state.sceneId);
           setGeometry(geometry);
+          await fetchEmitting();
           state.geometryVersion = version;
         }
         return;

@@ -6,7 +6,10 @@
 //! within one input face only, so colours never blend across a crease.
 //!
 //! Tone map: exposure `k = 0.18 / Lavg`, `Lavg` the area-weighted geometric mean of the
-//! vertices' Rec. 709 luminance (each patch's area shared among its corners) (Reinhard et al. 2002, "Photographic Tone Reproduction", eq. 1-2); each
+//! vertices' Rec. 709 luminance (each patch's area shared among its corners) (Reinhard et al. 2002, "Photographic Tone Reproduction", eq. 1-2)
+//! over the patches of objects that do not emit (all patches when every object emits or none
+//! is known to): the key is that of the lit scene, so a large emitter (a sky) does not darken
+//! everything it lights; each
 //! channel becomes `x / (1 + x)` with `x = k * radiosity`. [`srgb_byte`] then applies the sRGB
 //! transfer function (IEC 61966-2-1) for 8-bit images.
 
@@ -54,16 +57,25 @@ fn luminance(rgb: &Rgb) -> f32 {
     0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
 }
 
-/// The exposure `0.18 / Lavg` of the module docs (1 for a black scene).
-pub fn exposure(geometry: &Geometry, vertex_radiosity: &[Rgb]) -> f32 {
+/// The exposure `0.18 / Lavg` of the module docs (1 for a black scene); `emitting[o]` says
+/// whether object `o` emits (as `/api/objects` reports it; missing entries do not).
+pub fn exposure(geometry: &Geometry, vertex_radiosity: &[Rgb], emitting: &[bool]) -> f32 {
     let brightest = vertex_radiosity.iter().map(luminance).fold(0.0, f32::max);
     if brightest <= 0.0 {
         return 1.0;
     }
     // Black vertices would send the log-average to zero; floor them far below the brightest.
     let floor = 1e-4 * brightest;
+    let emits = |p: usize| {
+        let object = geometry.patch_objects.get(p).copied().unwrap_or(u32::MAX);
+        emitting.get(object as usize).copied().unwrap_or(false)
+    };
+    let lit_only = (0..geometry.patches.len()).any(|p| !emits(p));
     let (mut log_sum, mut area_sum) = (0.0f64, 0.0f64);
-    for patch in &geometry.patches {
+    for (p, patch) in geometry.patches.iter().enumerate() {
+        if lit_only && emits(p) {
+            continue;
+        }
         let used = corners(patch);
         let share = patch_area(geometry, patch) / used.len() as f64;
         for &c in used {
@@ -92,4 +104,39 @@ pub fn srgb_byte(linear: f32) -> u8 {
         1.055 * c.powf(1.0 / 2.4) - 0.055
     };
     (encoded * 255.0 + 0.5) as u8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two unit squares: object 0 lit at luminance 1, object 1 an emitter at 1000.
+    #[test]
+    fn the_exposure_is_the_lit_surfaces_key() {
+        let geometry = Geometry {
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [2.0, 0.0, 0.0],
+                [3.0, 0.0, 0.0],
+                [3.0, 1.0, 0.0],
+                [2.0, 1.0, 0.0],
+            ],
+            patches: vec![[0, 1, 2, 3], [4, 5, 6, 7]],
+            patch_objects: vec![0, 1],
+            objects: vec!["wall".into(), "sky".into()],
+            camera: None,
+            textures: None,
+        };
+        let mut radiosity = vec![[1.0f32; 3]; 4];
+        radiosity.extend([[1000.0; 3]; 4]);
+        let close = |a: f32, b: f64| (f64::from(a) - b).abs() < 1e-6 * b;
+        assert!(close(exposure(&geometry, &radiosity, &[false, true]), 0.18));
+        // Not known to emit, or everything emits: the log-average of 1 and 1000.
+        let both = 0.18 / 1000f64.sqrt();
+        assert!(close(exposure(&geometry, &radiosity, &[]), both));
+        assert!(close(exposure(&geometry, &radiosity, &[true, true]), both));
+    }
 }

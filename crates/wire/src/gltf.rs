@@ -38,7 +38,8 @@ fn json_string(text: &str) -> String {
 }
 
 /// Encodes `geometry` with per-vertex radiosity (W/m^2) as a GLB file; `textures` are the PNGs
-/// its texture section names (`/api/textures/{index}`), embedded.
+/// its texture section names (`/api/textures/{index}`), embedded; `emitting[o]` whether object
+/// `o` emits (left out of the exposure, [`crate::display`]).
 ///
 /// Every primitive is unlit (`KHR_materials_unlit`): `COLOR_0` is the tone-mapped light. A
 /// textured primitive's `COLOR_0` is the light divided by its texture's mean (what a white texel
@@ -47,9 +48,10 @@ fn json_string(text: &str) -> String {
 pub fn encode_glb(
     geometry: &Geometry,
     textures: &[impl AsRef<[u8]>],
+    emitting: &[bool],
     vertex_radiosity: &[[f32; 3]],
 ) -> Vec<u8> {
-    let k = exposure(geometry, vertex_radiosity);
+    let k = exposure(geometry, vertex_radiosity, emitting);
     let surface = geometry.textures.as_ref();
     let texture_of = |patch: usize| {
         surface

@@ -28,7 +28,7 @@ fn glb_structure_matches_the_specification() {
     // One radiosity per vertex: the floor's four, then the lamp's three.
     let mut radiosity = vec![[0.5, 0.4, 0.3]; 4];
     radiosity.extend([[20.0, 20.0, 20.0]; 3]);
-    let glb = wire::gltf::encode_glb(&geometry, &[] as &[&[u8]], &radiosity);
+    let glb = wire::gltf::encode_glb(&geometry, &[] as &[&[u8]], &[false, true], &radiosity);
     assert_eq!(&glb[0..4], b"glTF");
     assert_eq!(word(&glb, 4), 2);
     assert_eq!(word(&glb, 8) as usize, glb.len());

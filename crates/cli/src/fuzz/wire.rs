@@ -111,7 +111,8 @@ impl Target for WireTarget {
         if let Ok(geometry) = Geometry::decode(bytes) {
             decoded = true;
             let radiosity = vec![[1.0f32; 3]; geometry.positions.len()];
-            let exposure = wire::display::exposure(&geometry, &radiosity);
+            let emitting: Vec<bool> = (0..geometry.objects.len()).map(|o| o % 2 == 0).collect();
+            let exposure = wire::display::exposure(&geometry, &radiosity, &emitting);
             if !exposure.is_finite() {
                 return Err(format!("exposure {exposure} of a decoded geometry"));
             }
