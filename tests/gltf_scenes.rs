@@ -115,3 +115,42 @@ fn an_obj_map_kd_is_kd_times_the_textures_linear_mean() {
         "{missing}"
     );
 }
+
+#[test]
+fn gltf_texture_coordinates_map_each_face_into_its_base_colour_texture() {
+    // A 2 x 1 m floor moved 1 m along x, TEXCOORD_0 = (local x, local z): the white-black
+    // texture twice across. Base colour 0.5 times the texture's linear mean 0.5.
+    let scene = load("textured-floor.gltf").expect("loads");
+    assert_eq!(scene.textures.len(), 1);
+    assert!(
+        (scene.textures[0].mean - solver::Rgb::splat(0.5))
+            .abs()
+            .max_element()
+            < 1e-12
+    );
+    assert_eq!(scene.faces.len(), 2);
+    for face in &scene.faces {
+        assert!(
+            (face.reflectance - solver::Rgb::splat(0.25))
+                .abs()
+                .max_element()
+                < 1e-12
+        );
+        let map = face.texture.as_ref().expect("the floor is textured");
+        assert_eq!(map.texture, 0);
+        for &p in face.polygon.corners() {
+            let [u, v] = map.uv_at(p);
+            assert!(
+                (u - (p.x - 1.0)).abs() < 1e-9 && (v - p.z).abs() < 1e-9,
+                "{p}: {u} {v}"
+            );
+        }
+    }
+    let nan = load("textured-floor-nan-uv.gltf").unwrap_err().to_string();
+    assert!(
+        nan.ends_with(
+            "object 'floor' primitive 0: TEXCOORD_0: vertex 1 has [NaN, 0.0], not finite within ±1e6"
+        ),
+        "{nan}"
+    );
+}

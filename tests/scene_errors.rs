@@ -311,3 +311,29 @@ fn every_fuzz_regression_scene_gives_its_expected_outcome() {
         }
     }
 }
+
+#[test]
+fn bad_texture_coordinates_name_their_line() {
+    let (error, path) = error_of(
+        &format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}vt 0 inf\nf 1/1 2/1 3/1\n"),
+        Some(MTL),
+    );
+    assert_eq!(
+        error,
+        format!(
+            "{}:8: texture coordinate 1 has 'inf', which is not a finite number within ±1e6",
+            path.display()
+        )
+    );
+    let (error, path) = error_of(
+        &format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}vt 0 0\nf 1/1 2/2 3/1\n"),
+        Some(MTL),
+    );
+    assert_eq!(
+        error,
+        format!(
+            "{}:9: face refers to texture coordinate 2, but only 1 are defined before it",
+            path.display()
+        )
+    );
+}
