@@ -99,7 +99,8 @@ fn surface_textures(scene: &Scene, mesh: &Mesh) -> Option<SurfaceTextures> {
             Some(map) => {
                 for &c in &patch.corners[..patch.corner_count()] {
                     let uv = map.uv_at(mesh.positions[c as usize]).map(|x| x as f32);
-                    // Coordinates are bounded at load; rounding cannot make them infinite.
+                    // Bounded at load (±1e6), so finite; viewers would refuse the whole
+                    // geometry for one that is not.
                     uvs[c as usize] = uv.map(|x| if x.is_finite() { x } else { 0.0 });
                 }
                 map.texture
