@@ -24,28 +24,6 @@ fn chromium_missing() -> bool {
     missing
 }
 
-/// The value of `data-NAME="…"` on the page's body in `dom`.
-fn body_data(dom: &str, name: &str) -> Option<String> {
-    let body = &dom[dom.find("<body")?..];
-    let body = &body[..body.find('>')?];
-    let key = format!("data-{name}=\"");
-    let start = body.find(&key)? + key.len();
-    Some(body[start..start + body[start..].find('"')?].to_string())
-}
-
-/// Headless Chromium on `url`, page time running `budget_ms`; its stdout.
-fn chromium(url: &str, extra: &[&str]) -> String {
-    let output = Command::new(CHROMIUM)
-        .args(["--headless", "--no-sandbox", "--use-angle=swiftshader"])
-        .args(["--enable-unsafe-swiftshader", "--window-size=640,560"])
-        .args(["--virtual-time-budget=20000", "--hide-scrollbars"])
-        .args(extra)
-        .arg(url)
-        .output()
-        .expect("chromium runs");
-    String::from_utf8_lossy(&output.stdout).into_owned()
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_page_shows_the_final_frame_as_the_headless_client_draws_it() {
     if chromium_missing() {
@@ -83,41 +61,39 @@ async fn compare_page_with_client(scene: &std::path::Path) {
     let shared = serve(scene, listener);
     until_final(&shared).await;
 
-    // A fixed canvas size, so both runs and the client draw the same pixels.
-    let url = format!("http://{address}/?width=640&height=480");
-    let shot = tempfile::tempdir().unwrap();
-    let png = shot.path().join("page.png");
-    // One run dumps the page and screenshots it at the end of its page time, so the picture
-    // is the state the page reports. Headless Chromium under virtual time now and then never
-    // gets its WebSocket through (the page then says "reconnecting"): up to three runs.
-    let dom = tokio::task::spawn_blocking({
-        let png = png.clone();
-        move || {
-            let screenshot = format!("--screenshot={}", png.display());
-            let mut dom = String::new();
-            for _ in 0..3 {
-                dom = chromium(&url, &["--dump-dom", &screenshot]);
-                if body_data(&dom, "final").as_deref() == Some("true") {
-                    break;
-                }
-            }
-            dom
-        }
-    })
-    .await
+    // A fixed canvas size, so the page and the client draw the same pixels. Driven over the
+    // DevTools protocol in real time: under `--virtual-time-budget` the page's time ran on
+    // while an image (a texture) decoded off the main thread, and the budget ran out first.
+    let mut page = Page::open(&format!("http://{address}/?width=640&height=480")).await;
+    // A viewport that holds the whole canvas (a DevTools-driven window may be shorter).
+    let metrics =
+        serde_json::json!({"width": 640, "height": 560, "deviceScaleFactor": 1, "mobile": false});
+    page.call("Emulation.setDeviceMetricsOverride", metrics)
+        .await;
+    let shown = page.until(
+        "d.final === 'true' && d.checksum !== '' && \
+         document.getElementById('status').textContent.includes('matches /api/solution')",
+    );
+    let state = tokio::time::timeout(Duration::from_secs(60), shown)
+        .await
+        .expect("the page shows the final frame, checked against /api/solution, within 60 s");
+    let size = page.eval("document.body.dataset.canvas").await;
+    let screenshot = base64::Engine::decode(
+        &base64::engine::general_purpose::STANDARD,
+        page.screenshot().await,
+    )
     .unwrap();
+    drop(page);
     shared.edits.close();
     let current = shared.hub.current();
-    assert_eq!(body_data(&dom, "final").as_deref(), Some("true"), "{dom}");
     assert_eq!(
-        body_data(&dom, "checksum"),
-        Some(current.checksum.to_string()),
-        "{dom}"
+        state["checksum"].as_str(),
+        Some(current.checksum.to_string().as_str()),
+        "{state}"
     );
-    assert!(dom.contains("matches /api/solution"), "{dom}");
 
     // The same frame drawn by the headless client at the page's camera and canvas size.
-    let size = body_data(&dom, "canvas").expect("the page names its canvas size");
+    let size = size.as_str().expect("the page names its canvas size");
     let (width, height) = size.split_once('x').unwrap();
     let (width, height): (u32, u32) = (width.parse().unwrap(), height.parse().unwrap());
     let served = shared.hub.geometry();
@@ -145,7 +121,7 @@ async fn compare_page_with_client(scene: &std::path::Path) {
         emitting,
     };
     let expected = render(&model, &buffer, &view, width, height);
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
+    let decoder = png::Decoder::new(std::io::Cursor::new(&screenshot));
     let mut reader = decoder.read_info().unwrap();
     let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
     let frame = reader.next_frame(&mut pixels).unwrap();
@@ -160,7 +136,7 @@ async fn compare_page_with_client(scene: &std::path::Path) {
         }
     }
     if let Some(dir) = std::env::var_os("RADCAST_BROWSER_DEBUG") {
-        std::fs::copy(&png, std::path::Path::new(&dir).join("page.png")).unwrap();
+        std::fs::write(std::path::Path::new(&dir).join("page.png"), &screenshot).unwrap();
         expected
             .write_png(&std::path::Path::new(&dir).join("client.png"))
             .unwrap();
