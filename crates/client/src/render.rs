@@ -5,7 +5,7 @@
 use anyhow::{Context, bail};
 use glam::{Vec2, Vec3};
 use std::path::Path;
-use wire::display::{corners, exposure, srgb_byte, tone_map};
+use wire::display::{corners, exposure, srgb_byte, srgb_to_linear, tone_map};
 use wire::{ColourBuffer, Geometry};
 
 /// A pinhole camera.
@@ -137,18 +137,15 @@ impl TextureImage {
         let mut data = vec![0; reader.output_buffer_size().context("PNG too large")?];
         let frame = reader.next_frame(&mut data).context("decoding the PNG")?;
         let channels = frame.color_type.samples();
-        let srgb = |b: u8| {
-            let c = f32::from(b) / 255.0;
-            match c <= 0.04045 {
-                true => c / 12.92,
-                false => ((c + 0.055) / 1.055).powf(2.4),
-            }
-        };
         let texels = data[..frame.buffer_size()]
             .chunks_exact(channels)
             .map(|t| match channels {
-                1 | 2 => Vec3::splat(srgb(t[0])),
-                _ => Vec3::new(srgb(t[0]), srgb(t[1]), srgb(t[2])),
+                1 | 2 => Vec3::splat(srgb_to_linear(t[0])),
+                _ => Vec3::new(
+                    srgb_to_linear(t[0]),
+                    srgb_to_linear(t[1]),
+                    srgb_to_linear(t[2]),
+                ),
             })
             .collect();
         Ok(TextureImage {

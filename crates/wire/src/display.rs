@@ -95,6 +95,16 @@ pub fn tone_map(rgb: Rgb, exposure: f32) -> Rgb {
     })
 }
 
+/// Decodes an 8-bit sRGB byte (a texel) to a linear value in [0, 1] (IEC 61966-2-1).
+pub fn srgb_to_linear(byte: u8) -> f32 {
+    let c = f32::from(byte) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
 /// Encodes a linear display value in [0, 1] as an 8-bit sRGB byte.
 pub fn srgb_byte(linear: f32) -> u8 {
     let c = linear.clamp(0.0, 1.0);
