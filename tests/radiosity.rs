@@ -146,3 +146,29 @@ fn scaling_the_scene_leaves_radiosity_unchanged() {
         }
     }
 }
+
+#[test]
+fn what_viewers_see_of_a_lit_plate_holds_its_light() {
+    // A 1 x 1 plate 0.4 under an equal black lamp: the light it reflects is rho E F (Howell
+    // C-11), and the direct light curves strongly across its patches. Interpolating exact point
+    // values would lose part of it; the corners also carry what interpolation misses, so the
+    // mean of the smooth reading is the plate's light.
+    let (rho, emission, gap) = (0.6, 10.0, 0.4);
+    let expected = rho * emission * howell_parallel(1.0, 1.0, gap);
+    for patches in [20, 80] {
+        let solved = solve_with(
+            parallel_plates(1.0, 1.0, gap, grey(rho, 0.0), grey(0.0, emission)),
+            patches,
+            Method::Gmres,
+            1e-9,
+        );
+        let shown = smooth_mean(&solved, "receiver");
+        println!("{patches} patches: smooth mean {shown} against {expected}");
+        for channel in shown.to_array() {
+            assert!(
+                (channel - expected).abs() < 5e-3 * expected,
+                "{patches} patches: viewers see {channel} on average, the plate reflects {expected}"
+            );
+        }
+    }
+}

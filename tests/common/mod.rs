@@ -226,3 +226,23 @@ pub fn object_form_factor(mesh: &Mesh, factors: &DenseFormFactors, from: u32, to
     }
     weighted / area
 }
+
+/// The mean over `object`'s surface of what viewers show: the vertex values interpolated over
+/// each patch's fan triangles, integrated exactly.
+pub fn smooth_mean(solved: &Solved, object: &str) -> Rgb {
+    let (mut sum, mut area) = (Rgb::ZERO, 0.0);
+    for patch in &solved.mesh.patches {
+        if solved.scene.objects[patch.object as usize].name != object {
+            continue;
+        }
+        let ids = &patch.corners[..patch.corner_count()];
+        let at = |k: usize| solved.mesh.positions[ids[k] as usize];
+        let value = |k: usize| solved.vertex_radiosity[ids[k] as usize];
+        for k in 1..ids.len() - 1 {
+            let triangle = (at(k) - at(0)).cross(at(k + 1) - at(0)).length() / 2.0;
+            sum += (value(0) + value(k) + value(k + 1)) / 3.0 * triangle;
+            area += triangle;
+        }
+    }
+    sum / area
+}

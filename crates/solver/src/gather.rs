@@ -7,7 +7,12 @@
 //! itself from every emitter with the exact point-to-polygon factor and sampled visibility, and
 //! only the smooth indirect part is averaged from the patches around it (the "final gather" of
 //! Lischinski, Tampieri, Greenberg 1993, "Combining Hierarchical Radiosity and Discontinuity
-//! Meshing"). Everything is linear in each emitter's emission, so edits still superpose.
+//! Meshing"). Point values interpolated linearly lose light where the direct light curves (at a
+//! wall's top edge it rises from zero): the patch centroids gather too, and what interpolation
+//! misses over each patch goes into its corners with the indirect light, so the mean of what
+//! viewers show over a surface is its solved light (the Cornell box at 148 patches: energy
+//! −4.6% → −0.1%, smooth RMS 13% → 7.8%). Everything is linear in each emitter's emission, so
+//! edits still superpose.
 
 use crate::geometry::{Polygon, point_to_polygon_form_factor};
 use crate::mesh::Mesh;
@@ -64,14 +69,16 @@ struct Emitter {
     brightness: f64,
 }
 
-/// A mesh corner and the points just inside the patches around it.
-struct Corner {
-    /// The corner moved [`LIMIT_INSET`] into its first patch.
+/// A point where direct light is gathered (a mesh corner or a patch's centroid), and the points
+/// around it that shadow rays start from.
+struct GatherPoint {
+    /// The point itself, a corner moved [`LIMIT_INSET`] into its first patch.
     limit: DVec3,
     normal: DVec3,
     face: u32,
-    /// Up to four points, each [`INSET`] of the way into one patch that uses the corner: rays
-    /// start from them in turn, so a corner on a contact line sees the mean of both sides.
+    /// Up to four points, each [`INSET`] of the way into one patch that uses the corner (the
+    /// centroid itself for a centroid): rays start from them in turn, so a corner on a contact
+    /// line sees the mean of both sides.
     insides: Vec<DVec3>,
 }
 
@@ -79,10 +86,11 @@ struct Corner {
 /// corner light can reach. It depends on the geometry and on which faces emit, not on how
 /// much: built once per mesh, it serves every emission edit.
 pub struct CornerLight {
-    /// Per corner, `factors[offsets[c]..offsets[c + 1]]`: (emitting face, form factor from the
-    /// corner to it with visibility).
-    offsets: Vec<u32>,
-    factors: Vec<(u32, f32)>,
+    /// Per mesh corner, the emitters it sees.
+    corners: DirectFactors,
+    /// Per patch, the emitters its centroid sees: with the corners, the direct light's mean
+    /// over the patch to second order.
+    centres: DirectFactors,
     /// Whether direct light is gathered at the corners (at most [`MAX_GATHERED_EMITTERS`]
     /// emitting faces); if not, corners average their patches' whole reflected radiosity.
     gathered: bool,
@@ -108,44 +116,29 @@ impl CornerLight {
             })
             .collect();
         let gathered = emitters.len() <= MAX_GATHERED_EMITTERS;
-        let corners = corners_of(mesh);
-        let per_corner: Vec<Vec<(u32, f32)>> = corners
-            .par_iter()
-            .enumerate()
-            .map(|(index, corner)| match corner {
-                Some(corner) if gathered => {
-                    let unoccluded: Vec<f64> = emitters
-                        .iter()
-                        .map(|e| unoccluded_factor(corner, e))
-                        .collect();
-                    let total: f64 = unoccluded
-                        .iter()
-                        .zip(&emitters)
-                        .map(|(f, e)| f * e.brightness)
-                        .sum();
-                    emitters
-                        .iter()
-                        .zip(&unoccluded)
-                        .filter(|(_, f)| **f > 0.0)
-                        .filter_map(|(e, &f)| {
-                            let budget = if f * e.brightness < MINOR_SHARE * total {
-                                &MINOR_RAYS
-                            } else {
-                                &RAYS
-                            };
-                            let factor = f * seen_share(corner, e, occluders, index, budget);
-                            (factor > 0.0).then_some((e.face, factor as f32))
-                        })
-                        .collect()
-                }
-                _ => Vec::new(),
+        let centres: Vec<Option<GatherPoint>> = mesh
+            .patches
+            .iter()
+            .map(|patch| {
+                Some(GatherPoint {
+                    limit: patch.centroid,
+                    normal: patch.normal,
+                    face: patch.face,
+                    insides: vec![patch.centroid],
+                })
             })
             .collect();
-        let mut offsets = Vec::with_capacity(per_corner.len() + 1);
-        offsets.push(0);
-        for list in &per_corner {
-            offsets.push(offsets.last().copied().unwrap_or(0) + list.len() as u32);
-        }
+        let (corners, centres) = if gathered {
+            let corners = DirectFactors::gather(&corners_of(mesh), &emitters, occluders, 0);
+            let centres =
+                DirectFactors::gather(&centres, &emitters, occluders, mesh.positions.len());
+            (corners, centres)
+        } else {
+            (
+                DirectFactors::none(mesh.positions.len()),
+                DirectFactors::none(mesh.patches.len()),
+            )
+        };
         let reached = mesh
             .patches
             .par_iter()
@@ -161,8 +154,8 @@ impl CornerLight {
             })
             .collect();
         CornerLight {
-            offsets,
-            factors: per_corner.into_iter().flatten().collect(),
+            corners,
+            centres,
             gathered,
             reached,
         }
@@ -172,9 +165,12 @@ impl CornerLight {
     /// the patches' current `emission` (`transport` is the one that solution came from): the
     /// corner's emission, its reflectance times the direct irradiance gathered there, and the
     /// area-weighted mean, over the patches around it that light reaches, of their indirect
-    /// reflected radiosity. A patch's indirect part is its reflected radiosity less what
-    /// `transport` carries straight from the emitters, so the errors the transport makes in
-    /// direct light cancel instead of adding up.
+    /// reflected radiosity and of what interpolating the corners' direct light misses over
+    /// them. A patch's indirect part is its reflected radiosity less what `transport` carries
+    /// straight from the emitters, so the errors the transport makes in direct light cancel
+    /// instead of adding up; what interpolation misses is the direct light's second-order mean
+    /// over the patch (from its corners and centroid) less the interpolated mean, so what
+    /// viewers show of a patch holds its light where the direct light curves.
     pub fn corner_radiosity(
         &self,
         mesh: &Mesh,
@@ -194,13 +190,30 @@ impl CornerLight {
                 .max()
                 .unwrap_or(0)
         ];
+        for (i, patch) in mesh.patches.iter().enumerate() {
+            face_emission[patch.face as usize] = emission[i];
+        }
+        let direct = self.corners.irradiance(&face_emission);
+        let centre_direct = self.centres.irradiance(&face_emission);
         let mut sums = vec![(Rgb::ZERO, 0.0); mesh.positions.len()];
         // Per corner, its face's emission and reflectance; `None` for a corner no patch uses.
         let mut surface = vec![None; mesh.positions.len()];
         for (i, patch) in mesh.patches.iter().enumerate() {
-            face_emission[patch.face as usize] = emission[i];
-            let indirect = radiosity[i] - emission[i] - patch.reflectance * direct_gathered[i];
-            for (slot, &c) in patch.corners[..patch.corner_count()].iter().enumerate() {
+            let ids = &patch.corners[..patch.corner_count()];
+            // Where the direct light curves over a patch, its corners' values interpolated
+            // miss part of it (most at a wall's top edge, where it rises from zero): that
+            // part, the patch's second-order mean less the interpolated one, is averaged into
+            // the corners with the indirect light, so the smooth reading keeps the patch's
+            // energy.
+            let curvature = if self.gathered {
+                second_order_mean(ids, &direct, centre_direct[i])
+                    - interpolated_mean(mesh, ids, &direct)
+            } else {
+                Rgb::ZERO
+            };
+            let indirect =
+                radiosity[i] - emission[i] + patch.reflectance * (curvature - direct_gathered[i]);
+            for (slot, &c) in ids.iter().enumerate() {
                 let sum = &mut sums[c as usize];
                 if self.reached[i][slot] {
                     sum.0 += indirect * patch.area;
@@ -217,15 +230,125 @@ impl CornerLight {
                 // Buried on every side: no light arrives, only the face's own emission leaves.
                 let (sum, area) = sums[c];
                 let indirect = if area > 0.0 { sum / area } else { Rgb::ZERO };
-                let direct: Rgb = self.factors
-                    [self.offsets[c] as usize..self.offsets[c + 1] as usize]
-                    .iter()
-                    .map(|&(face, factor)| face_emission[face as usize] * factor as f64)
-                    .sum();
-                (own_emission + reflectance * direct + indirect).max(Rgb::ZERO)
+                (own_emission + reflectance * direct[c] + indirect).max(Rgb::ZERO)
             })
             .collect()
     }
+}
+
+/// The mean over a patch (corners `ids`) of a function known at its corners and its
+/// `centre`: the corners weigh 1/12 each, the centre the rest (3/4 on a triangle, 2/3 on a
+/// quadrilateral), which integrates every quadratic exactly on a triangle and a parallelogram.
+fn second_order_mean(ids: &[u32], at_corners: &[Rgb], centre: Rgb) -> Rgb {
+    let corner_weight = 1.0 / 12.0;
+    let corners: Rgb = ids.iter().map(|&c| at_corners[c as usize]).sum();
+    corners * corner_weight + centre * (1.0 - ids.len() as f64 * corner_weight)
+}
+
+/// The mean over a patch (corners `ids`) of `values` interpolated linearly over its fan
+/// triangles, as viewers show them.
+fn interpolated_mean(mesh: &Mesh, ids: &[u32], values: &[Rgb]) -> Rgb {
+    let at = |k: usize| mesh.positions[ids[k] as usize];
+    let (mut sum, mut area) = (Rgb::ZERO, 0.0);
+    for k in 1..ids.len() - 1 {
+        let triangle_area = (at(k) - at(0)).cross(at(k + 1) - at(0)).length() / 2.0;
+        let mean =
+            (values[ids[0] as usize] + values[ids[k] as usize] + values[ids[k + 1] as usize]) / 3.0;
+        sum += mean * triangle_area;
+        area += triangle_area;
+    }
+    if area > 0.0 { sum / area } else { Rgb::ZERO }
+}
+
+/// Per gather point, the emitting faces it sees and its form factor to each, visibility
+/// included: `factors[offsets[i]..offsets[i + 1]]`.
+struct DirectFactors {
+    offsets: Vec<u32>,
+    factors: Vec<(u32, f32)>,
+}
+
+impl DirectFactors {
+    /// `count` points that gather nothing.
+    fn none(count: usize) -> DirectFactors {
+        DirectFactors {
+            offsets: vec![0; count + 1],
+            factors: Vec::new(),
+        }
+    }
+
+    /// Gathers `emitters` at `points` (`None`: a point nothing uses); `seed_base` tells this
+    /// set of points' ray samples from another's.
+    fn gather(
+        points: &[Option<GatherPoint>],
+        emitters: &[Emitter],
+        occluders: &Occluders,
+        seed_base: usize,
+    ) -> DirectFactors {
+        let per_point: Vec<Vec<(u32, f32)>> = points
+            .par_iter()
+            .enumerate()
+            .map(|(index, point)| match point {
+                Some(point) => seen_factors(point, emitters, occluders, seed_base + index),
+                None => Vec::new(),
+            })
+            .collect();
+        let mut offsets = Vec::with_capacity(per_point.len() + 1);
+        offsets.push(0);
+        for list in &per_point {
+            offsets.push(offsets.last().copied().unwrap_or(0) + list.len() as u32);
+        }
+        DirectFactors {
+            offsets,
+            factors: per_point.into_iter().flatten().collect(),
+        }
+    }
+
+    /// Per point, the irradiance arriving straight from the emitters, W/m^2, with
+    /// `face_emission` per scene face.
+    fn irradiance(&self, face_emission: &[Rgb]) -> Vec<Rgb> {
+        self.offsets
+            .windows(2)
+            .map(|range| {
+                self.factors[range[0] as usize..range[1] as usize]
+                    .iter()
+                    .map(|&(face, factor)| face_emission[face as usize] * factor as f64)
+                    .sum()
+            })
+            .collect()
+    }
+}
+
+/// The emitters `point` sees, each with its form factor times the share visibility lets
+/// through; emitters that give it little light get the minor ray budget.
+fn seen_factors(
+    point: &GatherPoint,
+    emitters: &[Emitter],
+    occluders: &Occluders,
+    index: usize,
+) -> Vec<(u32, f32)> {
+    let unoccluded: Vec<f64> = emitters
+        .iter()
+        .map(|e| unoccluded_factor(point, e))
+        .collect();
+    let total: f64 = unoccluded
+        .iter()
+        .zip(emitters)
+        .map(|(f, e)| f * e.brightness)
+        .sum();
+    emitters
+        .iter()
+        .zip(&unoccluded)
+        .filter(|(_, f)| **f > 0.0)
+        .filter_map(|(e, &f)| {
+            let budget = if f * e.brightness < MINOR_SHARE * total {
+                &MINOR_RAYS
+            } else {
+                &RAYS
+            };
+            let factor = f * seen_share(point, e, occluders, index, budget);
+            (factor > 0.0).then_some((e.face, factor as f32))
+        })
+        .collect()
 }
 
 /// The point a fraction [`INSET`] of the way from `corner` to `inside`.
@@ -233,12 +356,12 @@ fn inset(corner: DVec3, inside: DVec3) -> DVec3 {
     corner + (inside - corner) * INSET
 }
 
-fn corners_of(mesh: &Mesh) -> Vec<Option<Corner>> {
-    let mut corners: Vec<Option<Corner>> = (0..mesh.positions.len()).map(|_| None).collect();
+fn corners_of(mesh: &Mesh) -> Vec<Option<GatherPoint>> {
+    let mut corners: Vec<Option<GatherPoint>> = (0..mesh.positions.len()).map(|_| None).collect();
     for patch in &mesh.patches {
         for &c in &patch.corners[..patch.corner_count()] {
             let position = mesh.positions[c as usize];
-            let corner = corners[c as usize].get_or_insert_with(|| Corner {
+            let corner = corners[c as usize].get_or_insert_with(|| GatherPoint {
                 limit: position + (patch.centroid - position) * LIMIT_INSET,
                 normal: patch.normal,
                 face: patch.face,
@@ -253,7 +376,7 @@ fn corners_of(mesh: &Mesh) -> Vec<Option<Corner>> {
 }
 
 /// Lambert's exact form factor from the corner to the emitter, unoccluded.
-fn unoccluded_factor(corner: &Corner, emitter: &Emitter) -> f64 {
+fn unoccluded_factor(corner: &GatherPoint, emitter: &Emitter) -> f64 {
     if corner.face == emitter.face {
         return 0.0;
     }
@@ -269,7 +392,7 @@ fn unoccluded_factor(corner: &Corner, emitter: &Emitter) -> f64 {
 /// the kernel-weighted share of stratified emitter points seen from just inside the patches
 /// around the corner (the first rays of `budget` alone where they all agree).
 fn seen_share(
-    corner: &Corner,
+    corner: &GatherPoint,
     emitter: &Emitter,
     occluders: &Occluders,
     index: usize,
@@ -307,8 +430,10 @@ fn seen_share(
 
 #[cfg(test)]
 mod tests {
+    use super::{CornerLight, second_order_mean};
     use crate::hierarchy::fixtures::{add_parallelogram, closed_cube, room_with_a_box};
     use crate::scene::{Material, Rgb, Scene};
+    use crate::visibility::Occluders;
     use crate::{
         HierarchySettings, Method, PatchTarget, SolveRequest, SolverSettings, solve_scene,
     };
@@ -340,10 +465,9 @@ mod tests {
     }
 
     #[test]
-    fn a_vertex_under_a_rectangular_lamp_gets_howells_factor_exactly() {
-        // A 2 x 2 floor meshed at 0.5 (a vertex at (1, 0, 1)) under a black 0.6 x 0.4 lamp
-        // whose corner is 0.5 above that vertex: nothing reflects light back, so the vertex
-        // holds the direct light alone.
+    fn a_vertex_under_a_rectangular_lamp_gathers_howells_factor_exactly() {
+        // A 2 x 2 floor meshed at 0.5 (a vertex at (1, 0, 1)) under a 0.6 x 0.4 lamp whose
+        // corner is 0.5 above that vertex.
         let mut scene = Scene::default();
         let floor = Material {
             reflectance: Rgb::new(0.5, 0.25, 0.125),
@@ -361,7 +485,7 @@ mod tests {
             (dvec3(1.0, 0.5, 1.0), x * 0.6, z * 0.4),
             lamp,
         );
-        let expected = floor.reflectance * 10.0 * howell_b3(0.6, 0.4, 0.5);
+        let expected = 10.0 * howell_b3(0.6, 0.4, 0.5);
         for hierarchical in [false, true] {
             let solved = solve_scene(scene.clone(), &request(hierarchical), &crate::no_progress)
                 .expect("solves");
@@ -371,12 +495,49 @@ mod tests {
                 .iter()
                 .position(|p| p.distance(dvec3(1.0, 0.0, 1.0)) < 1e-12)
                 .expect("a floor vertex under the lamp's corner");
-            let got = solved.vertex_radiosity[corner];
-            println!("hierarchical {hierarchical}: {got} against Howell B-3 {expected}");
+            let light = CornerLight::new(&scene, &solved.mesh, &Occluders::new(&scene));
+            let face_emission = [Rgb::ZERO, Rgb::splat(10.0)];
+            let got = light.corners.irradiance(&face_emission)[corner];
+            println!("hierarchical {hierarchical}: {got} W/m^2 against Howell B-3 {expected}");
             assert!(
-                ((got - expected).abs() / expected).max_element() < 1e-5,
+                ((got - Rgb::splat(expected)).abs() / expected).max_element() < 1e-5,
                 "hierarchical {hierarchical}: {got} against Howell B-3 {expected}"
             );
+        }
+    }
+
+    #[test]
+    fn the_second_order_mean_integrates_quadratics_on_triangles_and_parallelograms() {
+        // f(x, y) = 1 + 2x - 3y + 5x^2 + 7xy - 11y^2, integrated in closed form.
+        let f = |p: DVec3| {
+            Rgb::splat(
+                1.0 + 2.0 * p.x - 3.0 * p.y + 5.0 * p.x * p.x + 7.0 * p.x * p.y - 11.0 * p.y * p.y,
+            )
+        };
+        // The unit triangle (0,0), (1,0), (0,1): mean of x = 1/3, x^2 = 1/6, xy = 1/12.
+        let triangle = [DVec3::ZERO, DVec3::X, DVec3::Y];
+        let triangle_mean = 1.0 + (2.0 - 3.0) / 3.0 + (5.0 - 11.0) / 6.0 + 7.0 / 12.0;
+        // The parallelogram (0,0), (2,0), (3,1), (1,1): mean of x = 3/2, y = 1/2,
+        // x^2 = 8/3, xy = 5/6, y^2 = 1/3.
+        let parallelogram = [
+            DVec3::ZERO,
+            dvec3(2.0, 0.0, 0.0),
+            dvec3(3.0, 1.0, 0.0),
+            dvec3(1.0, 1.0, 0.0),
+        ];
+        let parallelogram_mean = 1.0 + 3.0 - 1.5 + 5.0 * 8.0 / 3.0 + 7.0 * 5.0 / 6.0 - 11.0 / 3.0;
+        for (corners, centre, expected) in [
+            (
+                &triangle[..],
+                DVec3::new(1.0, 1.0, 0.0) / 3.0,
+                triangle_mean,
+            ),
+            (&parallelogram[..], dvec3(1.5, 0.5, 0.0), parallelogram_mean),
+        ] {
+            let values: Vec<Rgb> = corners.iter().map(|&p| f(p)).collect();
+            let ids: Vec<u32> = (0..corners.len() as u32).collect();
+            let got = second_order_mean(&ids, &values, f(centre));
+            assert!((got.x - expected).abs() < 1e-12, "{got} against {expected}");
         }
     }
 
