@@ -494,6 +494,16 @@ mod tests {
             restarts(&lines),
             said_restarts(&format!("{max_links} links (--max-links)"))
         );
+        // An attempt stops inside the generation that passes the budget: no generation
+        // finishes with more links and pairs still to decide than the budget.
+        for line in lines.iter().filter(|l| l.starts_with("refining")) {
+            let words: Vec<&str> = line.split(' ').collect();
+            let before = |word: &str| -> usize {
+                let at = words.iter().position(|w| w.starts_with(word)).expect(word);
+                words[at - 1].parse().expect("a count")
+            };
+            assert!(before("links") + before("pairs") <= max_links, "{line}");
+        }
         // At 0.8 the six faces link to each other unsplit.
         assert_eq!((stats.knob_used, stats.links), (0.8, 30));
         assert!(!stats.link_budget_reached);
