@@ -246,7 +246,7 @@ impl Peers {
         writeln!(out, "Peer rows: {}.\n", self.source)?;
         writeln!(
             out,
-            "radcast's seconds at the peer's error, interpolated log-log between the rows of the front above (★, whichever method) that bracket it; a ratio above 1 means radcast is faster.\n"
+            "radcast's seconds at the peer's error, interpolated log-log between the rows of the front above (★, whichever method) that bracket it (≤: the front's fastest row is already more accurate); a ratio above 1 means radcast is faster.\n"
         )?;
         writeln!(
             out,
@@ -257,11 +257,18 @@ impl Peers {
             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
         )?;
         for p in &self.rows {
-            let at =
-                |target: f64, reading: fn(&Row) -> f64| match seconds_at(&ours, target, reading) {
+            let at = |target: f64, reading: fn(&Row) -> f64| {
+                // Coarser than radcast's fastest row: that row already does better, so its
+                // seconds bound radcast's from above.
+                if let Some(fastest) = ours.first().filter(|r| reading(r) <= target) {
+                    let seconds = fastest.seconds[3];
+                    return format!("≤ {seconds:.3} | ≥ {:.1}×", p.seconds / seconds);
+                }
+                match seconds_at(&ours, target, reading) {
                     Some((seconds, false)) => format!("{seconds:.3} | {:.1}×", p.seconds / seconds),
                     _ => "outside the rows above | –".into(),
-                };
+                }
+            };
             writeln!(
                 out,
                 "| {} | {} | {} | {} | {:.3} | {:.4} | {:.4} | {:+.4} | {} | {} |",
@@ -572,4 +579,61 @@ fn plot(rows: &[Row], peers: &[Peers], path: &Path) -> anyhow::Result<()> {
         .draw()?;
     root.present()?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{PeerRow, Peers, Row};
+    use solver::accuracy::{ErrorStats, SolutionError};
+
+    fn ours(seconds: f64, smooth_rms: f64) -> Row {
+        let stats = |rms| ErrorStats {
+            rms,
+            ..ErrorStats::default()
+        };
+        Row {
+            scene: "box".into(),
+            patches: 100,
+            method: "gmres".into(),
+            rays: 1,
+            links: 0,
+            peak_bytes: 0,
+            seconds: [0.0, 0.0, 0.0, seconds],
+            error: SolutionError {
+                smooth: stats(smooth_rms),
+                flat: stats(2.0 * smooth_rms),
+                ..SolutionError::default()
+            },
+            pareto: true,
+        }
+    }
+
+    fn peer(seconds: f64, smooth_rms: f64) -> PeerRow {
+        PeerRow {
+            system: "Peer".into(),
+            setting: "T".into(),
+            leaves: 1,
+            links: 1,
+            seconds,
+            flat_rms: smooth_rms,
+            smooth_rms,
+            energy: 0.0,
+        }
+    }
+
+    #[test]
+    fn peers_are_met_between_our_rows_and_bounded_past_our_coarsest() {
+        let peers = Peers {
+            scene: "box".into(),
+            source: "here".into(),
+            // Between our rows (log-log halfway: 0.2 s), and coarser than our fastest row.
+            rows: vec![peer(2.0, 0.2), peer(1.0, 0.5)],
+        };
+        let table = peers
+            .comparison(&[ours(0.1, 0.4), ours(0.4, 0.1)])
+            .expect("a table");
+        let lines: Vec<&str> = table.lines().filter(|l| l.starts_with("| Peer")).collect();
+        assert!(lines[0].contains("| 0.200 | 10.0× |"), "{}", lines[0]);
+        assert!(lines[1].contains("| ≤ 0.100 | ≥ 10.0× |"), "{}", lines[1]);
+    }
 }
