@@ -71,6 +71,8 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
     let mut scene = Scene::default();
     // Image index -> index into `scene.textures`, for the base-colour images faces show.
     let mut shown: HashMap<usize, u32> = HashMap::new();
+    // Image index -> its linear mean, computed once however many materials use the image.
+    let mut image_means: HashMap<usize, Rgb> = HashMap::new();
     let mut names: HashMap<String, usize> = HashMap::new();
     let mut stack: Vec<(gltf::Node, DMat4)> = root.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
     while let Some((node, parent)) = stack.pop() {
@@ -127,8 +129,6 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
                     positions.len()
                 )));
             }
-            let material = material_of(&primitive.material(), &images)
-                .map_err(|reason| fail(format!("{at}: {reason}")))?;
             let base_texture = primitive
                 .material()
                 .pbr_metallic_roughness()
@@ -153,6 +153,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
                                     let texture = texture_of(&images[image]).map_err(|reason| {
                                         fail(format!("{at}: image {image}: {reason}"))
                                     })?;
+                                    image_means.insert(image, texture.mean);
                                     scene.textures.push(texture);
                                     let index = scene.textures.len() as u32 - 1;
                                     shown.insert(image, index);
@@ -166,6 +167,8 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
                 }
                 None => None,
             };
+            let material = material_of(&primitive.material(), &images, &mut image_means)
+                .map_err(|reason| fail(format!("{at}: {reason}")))?;
             for triangle in indices.chunks_exact(3) {
                 let corners: Vec<DVec3> = triangle.iter().map(|&i| positions[i as usize]).collect();
                 match &mapped {
@@ -186,15 +189,22 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
 fn material_of(
     material: &gltf::Material,
     images: &[gltf::image::Data],
+    image_means: &mut HashMap<usize, Rgb>,
 ) -> Result<Material, String> {
-    let texture_mean = |texture: Option<gltf::Texture>| -> Result<Rgb, String> {
-        match texture {
-            None => Ok(Rgb::ONE),
-            Some(texture) => images
-                .get(texture.source().index())
-                .ok_or_else(|| format!("texture {} has no image", texture.index()))
-                .and_then(linear_mean),
+    let mut texture_mean = |texture: Option<gltf::Texture>| -> Result<Rgb, String> {
+        let Some(texture) = texture else {
+            return Ok(Rgb::ONE);
+        };
+        let image = texture.source().index();
+        if let Some(&mean) = image_means.get(&image) {
+            return Ok(mean);
         }
+        let mean = images
+            .get(image)
+            .ok_or_else(|| format!("texture {} has no image", texture.index()))
+            .and_then(linear_mean)?;
+        image_means.insert(image, mean);
+        Ok(mean)
     };
     let pbr = material.pbr_metallic_roughness();
     let [r, g, b, _] = pbr.base_color_factor().map(f64::from);
