@@ -14,7 +14,7 @@
 //! −4.6% → −0.1%, smooth RMS 13% → 7.8%). Everything is linear in each emitter's emission, so
 //! edits still superpose.
 
-use crate::geometry::{Polygon, point_to_polygon_form_factor};
+use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
 use crate::mesh::Mesh;
 use crate::sampling::{pair_seed, stratified_uv};
 use crate::scene::{Rgb, Scene};
@@ -251,11 +251,11 @@ fn interpolated_mean(mesh: &Mesh, ids: &[u32], values: &[Rgb]) -> Rgb {
     let at = |k: usize| mesh.positions[ids[k] as usize];
     let (mut sum, mut area) = (Rgb::ZERO, 0.0);
     for k in 1..ids.len() - 1 {
-        let triangle_area = (at(k) - at(0)).cross(at(k + 1) - at(0)).length() / 2.0;
+        let weight = triangle_area(at(0), at(k), at(k + 1));
         let mean =
             (values[ids[0] as usize] + values[ids[k] as usize] + values[ids[k + 1] as usize]) / 3.0;
-        sum += mean * triangle_area;
-        area += triangle_area;
+        sum += mean * weight;
+        area += weight;
     }
     if area > 0.0 { sum / area } else { Rgb::ZERO }
 }

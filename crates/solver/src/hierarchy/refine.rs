@@ -246,7 +246,7 @@ impl Hierarchy {
             // above would find after the whole generation: both only grow), instead of
             // deciding the rest of a generation that is thrown away (on the 125k-triangle town,
             // each abandoned attempt spent about half its time on its last generation).
-            let watch_links = budget.overflow == Overflow::Abandon && tolerance.is_finite();
+            let watch_links = budget.overflow == Overflow::Abandon;
             let slice = if watch_links {
                 (pending.len() / GENERATION_SLICES).max(MIN_SLICE)
             } else {
