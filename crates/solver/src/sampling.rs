@@ -30,7 +30,9 @@ pub fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
         (offset >> 11) as f64 / (1u64 << 53) as f64,
         (offset & 0xFFFF_FFFF) as f64 / 4_294_967_296.0,
     );
-    let inset = |x: f64| 1e-3 + (1.0 - 2e-3) * x.fract();
+    // x >= 0, so its fraction is x less its integer part, the same bits as `fract` without the
+    // libm `trunc` call it becomes on baseline x86-64 (3.5% of a large town's solve).
+    let inset = |x: f64| 1e-3 + (1.0 - 2e-3) * (x - x as u64 as f64);
     (inset(u0 + k as f64 * A1), inset(v0 + k as f64 * A2))
 }
 
@@ -43,4 +45,25 @@ pub fn cosine_direction(normal: DVec3, u: f64, v: f64) -> DVec3 {
         + bitangent * (radius * angle.sin())
         + normal * (1.0 - u).max(0.0).sqrt())
     .normalize()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{splitmix64, stratified_uv};
+
+    #[test]
+    fn stratified_points_are_roberts_sequence_kept_off_the_border() {
+        for seed in 0..200u64 {
+            let offset = splitmix64(seed);
+            for k in [0, 1, 2, 15, 16, 63, 1000, u32::MAX] {
+                let (u, v) = stratified_uv(k, offset);
+                let u0 = (offset >> 11) as f64 / (1u64 << 53) as f64;
+                let v0 = (offset & 0xFFFF_FFFF) as f64 / 4_294_967_296.0;
+                let expected = |x: f64| 1e-3 + (1.0 - 2e-3) * x.fract();
+                assert_eq!(u, expected(u0 + k as f64 * 0.754_877_666_246_692_7));
+                assert_eq!(v, expected(v0 + k as f64 * 0.569_840_290_998_053_2));
+                assert!((1e-3..=1.0 - 1e-3).contains(&u) && (1e-3..=1.0 - 1e-3).contains(&v));
+            }
+        }
+    }
 }

@@ -220,7 +220,7 @@ impl Refiner<'_> {
     /// both ends: an unbiased estimate of the factor between any two sets of surfaces.
     fn sampled_factor(&self, receiver: u32, source: u32) -> f64 {
         let seed = pair_seed(receiver as usize, source as usize);
-        let mut sum = 0.0;
+        let (mut sum, mut cast) = (0.0, 0);
         for k in 0..CLUSTER_SAMPLES {
             let x = self.hierarchy.sample(receiver, k, seed);
             let y = self.hierarchy.sample(source, k, splitmix64(seed));
@@ -232,7 +232,7 @@ impl Refiner<'_> {
             if kernel == 0.0 {
                 continue;
             }
-            self.rays_cast.fetch_add(1, Ordering::Relaxed);
+            cast += 1;
             if self
                 .occluders
                 .segment_is_clear(x.position, y.position, [x.face, y.face])
@@ -240,6 +240,8 @@ impl Refiner<'_> {
                 sum += kernel / PI;
             }
         }
+        // Counted once a pair: an atomic add a ray had both threads fight over its cache line.
+        self.rays_cast.fetch_add(cast, Ordering::Relaxed);
         (self.node(source).area * sum / CLUSTER_SAMPLES as f64).min(1.0)
     }
 }

@@ -47,6 +47,7 @@ use crate::scene::{Rgb, Scene};
 use crate::solve::{NeedsEntries, SolveOutcome, SolverSettings, System, solve};
 use crate::visibility::Occluders;
 use crate::{Limit, Progress};
+use glam::DVec3;
 use operator::{Incoming, Slope};
 use rayon::prelude::*;
 use refine::{Budget, Overflow, RefineRun, RefineTarget, Refinement};
@@ -148,6 +149,8 @@ pub struct Hierarchy {
     area_prefix: Vec<f64>,
     /// Each input face's polygon.
     faces: Vec<Polygon>,
+    /// Each input face's unit normal (cluster samples take it for every point).
+    face_normals: Vec<DVec3>,
     /// Each input face's root element.
     face_node: Vec<u32>,
     /// Whether each input face's view is closed (its leaves' rows are normalised to one).

@@ -217,6 +217,7 @@ impl Hierarchy {
             order,
             area_prefix,
             faces: scene.faces.iter().map(|f| f.polygon).collect(),
+            face_normals: scene.faces.iter().map(|f| f.polygon.normal()).collect(),
             face_node,
             face_closed: vec![false; face_count],
             links: Vec::new(),
@@ -336,7 +337,7 @@ impl Hierarchy {
         let polygon = &self.faces[face as usize];
         SurfacePoint {
             position: polygon.uniform_point(u, v, pick),
-            normal: polygon.normal(),
+            normal: self.face_normals[face as usize],
             face,
         }
     }
