@@ -26,10 +26,17 @@ const DIGEST_BYTES: usize = 32;
 const HEADER_BYTES: usize = MAGIC.len() + DIGEST_BYTES + 8;
 
 /// SHA-256 of what the solver sees — the loaded scene (every position, face and material, as
-/// exact decimal text), the solve settings — and this program's version. Parsed content, not
+/// exact decimal text), the solve settings — and this program's version and
+/// [`solver::SOLUTION_REVISION`] (a build that solves the same scene to other values does not
+/// serve an earlier build's entries: the crate version alone did not change). Parsed content, not
 /// file bytes, so two files that load the same scene share an entry and no file the loader
 /// reads (an `mtllib` of any spelling) can change the answer without changing the digest.
 pub fn scene_digest(scene: &Scene, request: &SolveRequest) -> [u8; DIGEST_BYTES] {
+    digest_at_revision(scene, request, solver::SOLUTION_REVISION)
+}
+
+/// [`scene_digest`] as a build solving at `revision` computes it.
+fn digest_at_revision(scene: &Scene, request: &SolveRequest, revision: u32) -> [u8; DIGEST_BYTES] {
     struct Hashing(Sha256);
     impl std::fmt::Write for Hashing {
         fn write_str(&mut self, text: &str) -> std::fmt::Result {
@@ -42,8 +49,8 @@ pub fn scene_digest(scene: &Scene, request: &SolveRequest) -> [u8; DIGEST_BYTES]
     std::fmt::write(
         &mut hashing,
         format_args!(
-            "{scene:?}\n{request:?}\nradcast {}",
-            env!("CARGO_PKG_VERSION")
+            "{scene:?}\n{request:?}\nradcast {} solution revision {revision}",
+            env!("CARGO_PKG_VERSION"),
         ),
     )
     .expect("hashing never fails");
@@ -276,5 +283,12 @@ mod tests {
         let mut finer = request;
         finer.form_factors.rays_per_pair += 1;
         assert_ne!(base, scene_digest(&scene(0.5), &finer));
+        // A build whose numerics solve the same scene to other values is another entry.
+        let revision = solver::SOLUTION_REVISION;
+        assert_eq!(base, digest_at_revision(&scene(0.5), &request, revision));
+        assert_ne!(
+            base,
+            digest_at_revision(&scene(0.5), &request, revision - 1)
+        );
     }
 }

@@ -25,6 +25,12 @@ pub mod texture;
 pub mod transport;
 pub mod visibility;
 
+/// Which revision of the numerics this build solves with: bumped whenever the same scene and
+/// settings come out with different values (a new reconstruction, a changed rule), so that
+/// solutions cached by an earlier build are not served as this one's. 2: vertex values carry
+/// what interpolation misses of the direct light ([`gather`]).
+pub const SOLUTION_REVISION: u32 = 2;
+
 pub use form_factors::DenseFormFactors;
 pub use hierarchy::{HierarchySettings, HierarchyStats};
 pub use mesh::{Mesh, Patch, PatchTarget};
