@@ -116,22 +116,22 @@ impl CornerLight {
             })
             .collect();
         let gathered = emitters.len() <= MAX_GATHERED_EMITTERS;
-        let centres: Vec<Option<GatherPoint>> = mesh
-            .patches
-            .iter()
-            .map(|patch| {
-                Some(GatherPoint {
-                    limit: patch.centroid,
-                    normal: patch.normal,
-                    face: patch.face,
-                    insides: vec![patch.centroid],
-                })
-            })
-            .collect();
         let (corners, centres) = if gathered {
+            let centroids: Vec<Option<GatherPoint>> = mesh
+                .patches
+                .iter()
+                .map(|patch| {
+                    Some(GatherPoint {
+                        limit: patch.centroid,
+                        normal: patch.normal,
+                        face: patch.face,
+                        insides: vec![patch.centroid],
+                    })
+                })
+                .collect();
             let corners = DirectFactors::gather(&corners_of(mesh), &emitters, occluders, 0);
             let centres =
-                DirectFactors::gather(&centres, &emitters, occluders, mesh.positions.len());
+                DirectFactors::gather(&centroids, &emitters, occluders, mesh.positions.len());
             (corners, centres)
         } else {
             (
