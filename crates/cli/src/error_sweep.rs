@@ -171,15 +171,11 @@ pub fn run(
             });
         }
     }
-    // Pareto front per scene: nothing else is both faster and more accurate.
+    // Pareto front per scene: nothing else is both faster and more accurate to the eye.
     for i in 0..rows.len() {
-        let dominated = rows.iter().any(|o| {
-            o.scene == rows[i].scene
-                && o.seconds[3] <= rows[i].seconds[3]
-                && o.error.smooth.rms <= rows[i].error.smooth.rms
-                && (o.seconds[3] < rows[i].seconds[3]
-                    || o.error.smooth.rms < rows[i].error.smooth.rms)
-        });
+        let dominated = rows
+            .iter()
+            .any(|o| o.scene == rows[i].scene && dominates(o, &rows[i], smooth_rms));
         rows[i].pareto = !dominated;
     }
     std::fs::create_dir_all(out_dir)
@@ -227,15 +223,13 @@ impl Peers {
     }
 
     /// The peer's rows, and radcast's seconds at each row's smooth and flat RMS: log-log
-    /// between the two rows of radcast's front (whichever method) that bracket it, as a user
-    /// who wants that error would choose.
+    /// between the two rows of radcast's front for that reading (whichever method) that
+    /// bracket it, as a user who wants that error would choose.
     fn comparison(&self, rows: &[Row]) -> anyhow::Result<String> {
-        let mut ours: Vec<&Row> = rows
-            .iter()
-            .filter(|r| r.scene == self.scene && r.pareto)
-            .collect();
-        // Along the front, error falls as time grows.
-        ours.sort_by(|a, b| a.seconds[3].total_cmp(&b.seconds[3]));
+        let fronts = (
+            front(rows, &self.scene, smooth_rms),
+            front(rows, &self.scene, flat_rms),
+        );
         let mut out = String::new();
         writeln!(
             out,
@@ -246,7 +240,7 @@ impl Peers {
         writeln!(out, "Peer rows: {}.\n", self.source)?;
         writeln!(
             out,
-            "radcast's seconds at the peer's error, interpolated log-log between the rows of the front above (★, whichever method) that bracket it (≤: the front's fastest row is already more accurate); a ratio above 1 means radcast is faster.\n"
+            "radcast's seconds at the peer's error, interpolated log-log between the rows that bracket it on radcast's front for that reading, whichever method (smooth: the ★ rows above; flat: the rows nothing beats on time and flat RMS) (≤: the front's fastest row is already more accurate); a ratio above 1 means radcast is faster.\n"
         )?;
         writeln!(
             out,
@@ -257,14 +251,14 @@ impl Peers {
             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
         )?;
         for p in &self.rows {
-            let at = |target: f64, reading: fn(&Row) -> f64| {
+            let at = |target: f64, reading: fn(&Row) -> f64, ours: &[&Row]| {
                 // Coarser than radcast's fastest row: that row already does better, so its
                 // seconds bound radcast's from above.
                 if let Some(fastest) = ours.first().filter(|r| reading(r) <= target) {
                     let seconds = fastest.seconds[3];
                     return format!("≤ {seconds:.3} | ≥ {:.1}×", p.seconds / seconds);
                 }
-                match seconds_at(&ours, target, reading) {
+                match seconds_at(ours, target, reading) {
                     Some((seconds, false)) => format!("{seconds:.3} | {:.1}×", p.seconds / seconds),
                     _ => "outside the rows above | –".into(),
                 }
@@ -280,8 +274,8 @@ impl Peers {
                 p.smooth_rms,
                 p.flat_rms,
                 p.energy,
-                at(p.smooth_rms, |r| r.error.smooth.rms),
-                at(p.flat_rms, |r| r.error.flat.rms),
+                at(p.smooth_rms, smooth_rms, &fronts.0),
+                at(p.flat_rms, flat_rms, &fronts.1),
             )?;
         }
         Ok(out)
@@ -410,6 +404,33 @@ fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf], name: &str) -> anyh
 
 /// Total seconds of `rows` (sorted by patches, error falling) where `reading` is `target`
 /// ([`interpolate_at`]).
+/// What viewers see, interpolated.
+fn smooth_rms(row: &Row) -> f64 {
+    row.error.smooth.rms
+}
+
+/// The patch values.
+fn flat_rms(row: &Row) -> f64 {
+    row.error.flat.rms
+}
+
+/// Whether `a` is at least as fast and as accurate by `reading` as `b`, and better in one.
+fn dominates(a: &Row, b: &Row, reading: fn(&Row) -> f64) -> bool {
+    let (ta, tb) = (a.seconds[3], b.seconds[3]);
+    ta <= tb && reading(a) <= reading(b) && (ta < tb || reading(a) < reading(b))
+}
+
+/// The rows of `scene` that no other row dominates by `reading`, fastest first (along a
+/// front, error falls as time grows).
+fn front<'a>(rows: &'a [Row], scene: &str, reading: fn(&Row) -> f64) -> Vec<&'a Row> {
+    let of_scene = || rows.iter().filter(|r| r.scene == scene);
+    let mut front: Vec<&Row> = of_scene()
+        .filter(|r| !of_scene().any(|o| dominates(o, r, reading)))
+        .collect();
+    front.sort_by(|a, b| a.seconds[3].total_cmp(&b.seconds[3]));
+    front
+}
+
 fn seconds_at(rows: &[&Row], target: f64, reading: fn(&Row) -> f64) -> Option<(f64, bool)> {
     interpolate_at(rows, target, reading, |r| r.seconds[3])
 }
@@ -587,6 +608,10 @@ mod tests {
     use solver::accuracy::{ErrorStats, SolutionError};
 
     fn ours(seconds: f64, smooth_rms: f64) -> Row {
+        ours_reading(seconds, smooth_rms, 2.0 * smooth_rms)
+    }
+
+    fn ours_reading(seconds: f64, smooth_rms: f64, flat_rms: f64) -> Row {
         let stats = |rms| ErrorStats {
             rms,
             ..ErrorStats::default()
@@ -601,7 +626,7 @@ mod tests {
             seconds: [0.0, 0.0, 0.0, seconds],
             error: SolutionError {
                 smooth: stats(smooth_rms),
-                flat: stats(2.0 * smooth_rms),
+                flat: stats(flat_rms),
                 ..SolutionError::default()
             },
             pareto: true,
@@ -635,5 +660,31 @@ mod tests {
         let lines: Vec<&str> = table.lines().filter(|l| l.starts_with("| Peer")).collect();
         assert!(lines[0].contains("| 0.200 | 10.0× |"), "{}", lines[0]);
         assert!(lines[1].contains("| ≤ 0.100 | ≥ 10.0× |"), "{}", lines[1]);
+    }
+
+    #[test]
+    fn each_reading_is_met_on_its_own_front() {
+        // The middle row is off the smooth front (slower and worse to the eye than the first)
+        // but on the flat one: a peer's flat error is met there, not between the other two.
+        let rows = [
+            ours_reading(0.1, 0.4, 0.8),
+            ours_reading(0.15, 0.5, 0.3),
+            ours_reading(0.4, 0.1, 0.2),
+        ];
+        let peers = Peers {
+            scene: "box".into(),
+            source: "here".into(),
+            rows: vec![PeerRow {
+                flat_rms: 0.3,
+                ..peer(1.5, 0.2)
+            }],
+        };
+        let table = peers.comparison(&rows).expect("a table");
+        let line = table
+            .lines()
+            .find(|l| l.starts_with("| Peer"))
+            .expect("a row");
+        // Smooth 0.2 between the first and last rows (log-log: 0.2 s); flat 0.3 at 0.15 s.
+        assert!(line.ends_with("| 0.200 | 7.5× | 0.150 | 10.0× |"), "{line}");
     }
 }
