@@ -4,7 +4,7 @@
 
 use super::factor::{kernel_centre, tangent_coordinates};
 use super::shaft::Visibility;
-use super::tree::{MAX_DEPTH, Node};
+use super::tree::{ELEMENT_CHILDREN, MAX_DEPTH, Node};
 use super::{Hierarchy, Link};
 use crate::pair::FormFactorSettings;
 use crate::sampling::pair_seed;
@@ -343,10 +343,10 @@ impl Hierarchy {
     }
 
     /// The links or pairs `decision` on pair `(r, s)` makes: one kept link, or the pairs of
-    /// the split end's children (an element splits into four).
+    /// the split end's children.
     fn pairs_made(&self, r: u32, s: u32, decision: &Decision) -> usize {
         let children = |n: u32| match self.is_unsplit_element(n) {
-            true => 4,
+            true => ELEMENT_CHILDREN,
             false => self.nodes[n as usize].child_count as usize,
         };
         match decision {
@@ -376,7 +376,8 @@ impl Hierarchy {
             if self.is_unsplit_element(n) {
                 indices.push(i);
                 if !std::mem::replace(&mut marked[n as usize], true) {
-                    added += 3;
+                    // The element stops being a leaf; its children are.
+                    added += ELEMENT_CHILDREN - 1;
                 }
             }
         }

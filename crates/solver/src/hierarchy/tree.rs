@@ -16,6 +16,8 @@ use std::ops::Range;
 const LATTICE_STEPS: u32 = 1 << 24;
 /// Deepest split of an input face (each level halves the lattice step).
 pub(super) const MAX_DEPTH: u32 = 20;
+/// Children an element splits into: a quad's four quarters, a triangle's four similar ones.
+pub(super) const ELEMENT_CHILDREN: usize = 4;
 /// Marks "no parent".
 pub(super) const NONE: u32 = u32::MAX;
 
@@ -260,7 +262,7 @@ impl Hierarchy {
         let faces = node.faces.clone();
         let face = &self.faces[element.patch.face as usize];
         let l = element.lattice;
-        let children: [[[u32; 2]; 4]; 4] = if face.is_quad() {
+        let children: [[[u32; 2]; 4]; ELEMENT_CHILDREN] = if face.is_quad() {
             let centre = midpoint(l[0], l[2]);
             let (m01, m12, m23, m30) = (
                 midpoint(l[0], l[1]),
