@@ -50,7 +50,7 @@ async fn live(scene: &str, request: SolveRequest) -> (SocketAddr, Arc<Shared>, E
 
 /// The Cornell box solved from scratch with the light's emission replaced.
 fn from_scratch(light: [f64; 3]) -> Vec<[f32; 3]> {
-    let mut scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+    let mut scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
     let light_object = scene
         .objects
         .iter()
@@ -267,7 +267,7 @@ fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation
     // A tight tolerance, so warm and cold solves agree closely even on dim patches.
     let mut request = request();
     request.solver.tolerance = 1e-10;
-    let scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+    let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
     let mesh = solver::Mesh::build(&scene, request.patches);
     let mut session = solver::Session::new(&scene, &mesh, &request, &solver::no_progress).unwrap();
     session.solve(&solver::no_progress);
@@ -432,7 +432,7 @@ async fn moving_an_object_sends_new_geometry_and_colours_of_the_moved_scene() {
         );
     }
     // The colours are those of the moved scene.
-    let scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+    let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
     let mut mesh = solver::Mesh::build(&scene, request().patches);
     let mut moved_scene = scene.clone();
     moved_scene.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
@@ -472,7 +472,7 @@ async fn a_hierarchical_server_streams_its_leaves_and_new_leaves_after_a_move() 
     let (address, _, _edit_loop) = live("scenes/cornell-box.obj", hierarchical()).await;
     let mut viewer = Viewer::connect(address).await;
     viewer.wait_for(|_| true).await;
-    let scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+    let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
     let (vertices, expected) = solve(scene.clone());
     assert_eq!(viewer.buffer.colours.len(), vertices, "one code per vertex");
     assert_eq!(mismatch(&viewer.buffer, &expected), None);

@@ -5,7 +5,7 @@ use solver::Scene;
 use std::path::Path;
 
 fn load(name: &str) -> Result<Scene, solver::SceneError> {
-    Scene::load(&Path::new("tests/gltf").join(name))
+    solver::load_scene(&Path::new("tests/gltf").join(name))
 }
 
 #[test]

@@ -62,7 +62,7 @@ fn furnaces_stay_exact_with_and_without_an_occluder() {
 
 #[test]
 fn scaling_the_scene_changes_neither_leaves_nor_radiosity() {
-    let scene = Scene::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
+    let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
     let base = solve(scene.clone(), 0.2);
     for factor in [1e-14, 1e17] {
         let scaled = solve(scene.scaled(factor), 0.2);
@@ -193,7 +193,7 @@ fn leaves_gather_at_the_shadow_boundary_not_where_light_is_flat() {
 
 #[test]
 fn hierarchical_and_dense_agree_on_the_cornell_box() {
-    let scene = Scene::load_obj(Path::new("scenes/cornell-box.obj")).expect("loads");
+    let scene = solver::load_obj(Path::new("scenes/cornell-box.obj")).expect("loads");
     let error = 0.05;
     let dense = solve_scene(
         scene.clone(),
@@ -267,7 +267,7 @@ fn links_grow_in_proportion_to_faces_not_to_their_square() {
         let path = dir.join(format!("town-{triangles}.obj"));
         std::fs::write(&path, &town.obj).expect("writes");
         std::fs::write(dir.join("town.mtl"), &town.mtl).expect("writes");
-        let scene = Scene::load_obj(&path).expect("loads");
+        let scene = solver::load_obj(&path).expect("loads");
         let faces = scene.faces.len();
         let stats = solve(scene, 0.9).report.hierarchy.expect("hierarchical");
         println!(

@@ -85,8 +85,7 @@ fn receiver_mean_is_reflectance_times_form_factor_times_emission() {
 
 #[test]
 fn all_methods_agree_on_the_cornell_box() {
-    let scene =
-        solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
+    let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
     let tolerance = 1e-8;
     let answers: Vec<_> = Method::ALL
         .iter()
@@ -126,8 +125,7 @@ fn a_scene_without_emitters_solves_to_zeros() {
 
 #[test]
 fn scaling_the_scene_leaves_radiosity_unchanged() {
-    let scene =
-        solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
+    let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
     let base = solve_with(scene.clone(), 300, Method::Gmres, 1e-8);
     // From well under a nanometre to far past the BVH's f32 range (obvhs indexed out of bounds
     // past about 1e17; at 1e-10 the floor came out 38% too bright).

@@ -65,7 +65,7 @@ fn the_tracer_matches_the_analytic_point_form_factor() {
 
 #[test]
 fn the_same_seed_gives_the_same_reference_on_any_thread_count() {
-    let scene = solver::Scene::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+    let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
     let single = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()

@@ -14,7 +14,7 @@ fn load(obj: &str, mtl: Option<&str>) -> (Result<Scene, SceneError>, PathBuf, te
     }
     let path = folder.path().join("scene.obj");
     std::fs::write(&path, obj).expect("write obj");
-    (Scene::load_obj(&path), path, folder)
+    (solver::load_obj(&path), path, folder)
 }
 
 fn error_of(obj: &str, mtl: Option<&str>) -> (String, PathBuf) {
@@ -38,7 +38,7 @@ fn a_good_scene_loads_with_names_and_materials() {
 
 #[test]
 fn a_missing_file_is_named() {
-    let error = Scene::load_obj(Path::new("no/such/scene.obj"))
+    let error = solver::load_obj(Path::new("no/such/scene.obj"))
         .expect_err("missing")
         .to_string();
     assert!(
@@ -241,7 +241,7 @@ fn a_scene_or_material_file_that_is_not_a_file_is_refused_unread() {
         None,
     );
     assert_eq!(error, "/dev/zero: not a regular file");
-    let error = Scene::load_obj(Path::new("/dev/zero"))
+    let error = solver::load_obj(Path::new("/dev/zero"))
         .expect_err("a device")
         .to_string();
     assert_eq!(error, "/dev/zero: not a regular file");

@@ -6,8 +6,8 @@ use plotters::prelude::*;
 use solver::accuracy::{SolutionError, evaluate};
 use solver::reference::Reference;
 use solver::{
-    FormFactorSettings, HierarchySettings, Method, PatchTarget, Scene, SolveRequest,
-    SolverSettings, solve_scene,
+    FormFactorSettings, HierarchySettings, Method, PatchTarget, SolveRequest, SolverSettings,
+    solve_scene,
 };
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
@@ -82,7 +82,7 @@ pub fn run(
     for scene_path in scenes {
         let reference = load_reference(scene_path)?;
         let start = Instant::now();
-        let scene = Scene::load(scene_path)?;
+        let scene = solver::load_scene(scene_path)?;
         let load = start.elapsed().as_secs_f64();
         let Sweep {
             counts,

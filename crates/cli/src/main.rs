@@ -10,7 +10,7 @@ use solver::accuracy::evaluate;
 use solver::args::{SolveArgs, SolverArgs, budget_warnings};
 use solver::reference::{Reference, place_probes, trace_probes};
 use solver::visibility::Occluders;
-use solver::{Progress, ProgressLine, ProgressThrottle, Scene, SolveReport, solve_file};
+use solver::{Progress, ProgressLine, ProgressThrottle, SolveReport, solve_file};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -249,7 +249,7 @@ fn main() -> anyhow::Result<()> {
                 probes > 0 && samples > 1,
                 "--probes must be at least 1 and --samples at least 2"
             );
-            let scene = Scene::load(&path)?;
+            let scene = solver::load_scene(&path)?;
             // Before minutes of tracing, not after.
             create_parent(&out)?;
             let occluders = Occluders::new(&scene);
@@ -343,7 +343,7 @@ fn main() -> anyhow::Result<()> {
                 .with_context(|| format!("{}: cannot write", out.display()))?;
             std::fs::write(&mtl_path, &scene.mtl)
                 .with_context(|| format!("{}: cannot write", mtl_path.display()))?;
-            let loaded = Scene::load_obj(&out)?;
+            let loaded = solver::load_obj(&out)?;
             eprintln!(
                 "wrote {} and {}: {} objects, {} faces ({} triangles)",
                 out.display(),

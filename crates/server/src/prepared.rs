@@ -30,12 +30,12 @@ pub struct Prepared {
 /// hierarchy is refined later, on the solver thread, so the port opens at once; until then
 /// viewers see one patch per input face, then a geometry change to the leaves.
 pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepared> {
-    let scene = Scene::load(scene_path)?;
+    let scene = solver::load_scene(scene_path)?;
     let digest = crate::cache::scene_digest(&scene, &request);
     let scene_id = crate::cache::scene_id(&digest);
     let mesh = match &request.hierarchy {
         Some(_) => Mesh::build(&scene, PatchTarget::EdgeLength(f64::INFINITY)),
-        None => solver::pipeline::dense_mesh(&scene, &request)?,
+        None => solver::dense_mesh(&scene, &request)?,
     };
     let geometry = geometry_of(&scene, &mesh);
     Ok(Prepared {

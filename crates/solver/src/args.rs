@@ -5,7 +5,7 @@
 use crate::hierarchy::{HierarchySettings, HierarchyStats};
 use crate::mesh::PatchTarget;
 use crate::pair::{FormFactorSettings, MAX_RAYS_PER_PAIR};
-use crate::pipeline::{MethodChoice, SolveRequest};
+use crate::solution::request::{MethodChoice, SolveRequest};
 use crate::solve::SolverSettings;
 
 /// Everything that decides a solution besides the scene, as flags.

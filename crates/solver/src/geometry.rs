@@ -351,6 +351,19 @@ fn clip_above_plane(
     count
 }
 
+/// A convex polygon as faces: a planar convex quad stays one, anything else becomes a fan of
+/// triangles.
+pub(crate) fn convex_pieces(corners: &[DVec3]) -> Vec<Polygon> {
+    if let [a, b, c, d] = *corners
+        && Polygon::is_planar_convex_quad(a, b, c, d)
+    {
+        return vec![Polygon::quad(a, b, c, d)];
+    }
+    (1..corners.len().saturating_sub(1))
+        .map(|k| Polygon::triangle(corners[0], corners[k], corners[k + 1]))
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,22 +6,19 @@
 pub mod accuracy;
 #[cfg(feature = "clap")]
 pub mod args;
-mod contact;
 pub mod form_factors;
 pub mod gather;
 pub mod generate;
 pub mod geometry;
-pub mod gltf_input;
 pub mod hierarchy;
+pub mod input;
 pub mod mesh;
 pub mod pair;
-pub mod pipeline;
 pub mod reference;
 pub mod sampling;
 pub mod scene;
-pub mod session;
+pub mod solution;
 pub mod solve;
-pub mod texture;
 pub mod transport;
 pub mod visibility;
 
@@ -33,14 +30,14 @@ pub const SOLUTION_REVISION: u32 = 2;
 
 pub use form_factors::DenseFormFactors;
 pub use hierarchy::{HierarchySettings, HierarchyStats};
+pub use input::{SceneError, load_gltf, load_obj, load_scene};
 pub use mesh::{Mesh, Patch, PatchTarget};
 pub use pair::FormFactorSettings;
-pub use pipeline::{
-    MethodChoice, SolveError, SolveReport, SolveRequest, Solved, solve_file, solve_mesh,
-    solve_scene,
-};
-pub use scene::{Material, Rgb, Scene, SceneError, View};
-pub use session::{EditError, MoveReport, MoveWork, Session};
+pub use scene::{Material, Rgb, Scene, View};
+pub use solution::pipeline::{Solved, solve_file, solve_mesh, solve_scene};
+pub use solution::report::{ObjectRadiosity, SolveReport, StageSeconds};
+pub use solution::request::{MethodChoice, SolveError, SolveRequest, dense_mesh};
+pub use solution::session::{EditError, MoveReport, MoveWork, Session};
 pub use solve::{Method, SolveOutcome, SolverSettings, System, solve};
 pub use transport::{Entries, Transport};
 

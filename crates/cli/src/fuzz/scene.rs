@@ -6,7 +6,7 @@
 use super::mutate::{Choices, mutate_text};
 use super::{Input, Outcome, Target};
 use anyhow::Context;
-use solver::{FormFactorSettings, HierarchySettings, PatchTarget, Scene, SolveRequest};
+use solver::{FormFactorSettings, HierarchySettings, PatchTarget, SolveRequest};
 use std::path::Path;
 
 /// Scene files to start from: each OBJ and the MTL it names.
@@ -39,7 +39,7 @@ impl SceneTarget {
                 });
                 // Through the loader's own reader: a library may be /dev/zero.
                 if let Some(name) = library
-                    && let Ok(mtl) = solver::scene::read_scene_file(&folder.join(&name))
+                    && let Ok(mtl) = solver::input::read_scene_file(&folder.join(&name))
                 {
                     input.push((name, mtl.into_bytes()));
                 }
@@ -73,7 +73,7 @@ impl Target for SceneTarget {
         for (name, bytes) in input {
             std::fs::write(scratch.join(name), bytes).map_err(|e| format!("scratch: {e}"))?;
         }
-        let scene = match Scene::load_obj(&scratch.join(OBJ_NAME)) {
+        let scene = match solver::load_obj(&scratch.join(OBJ_NAME)) {
             Ok(scene) => scene,
             Err(error) => return names_a_file(&error.to_string(), input, scratch),
         };

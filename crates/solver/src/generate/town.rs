@@ -257,7 +257,7 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("town.obj"), &town.obj).unwrap();
         std::fs::write(dir.join("town.mtl"), &town.mtl).unwrap();
-        Scene::load_obj(&dir.join("town.obj")).unwrap()
+        crate::input::load_obj(&dir.join("town.obj")).unwrap()
     }
 
     #[test]

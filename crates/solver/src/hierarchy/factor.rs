@@ -2,18 +2,20 @@
 //! factor at the receiver's quadrature points), with kernel-weighted shadow rays where a shaft
 //! cannot decide visibility, and sampled point pairs where a cluster takes part.
 
-use super::refine::Refiner;
+use super::Hierarchy;
 use super::shaft::Visibility;
-use super::tree::{Bounds, Element};
+use super::tree::{Bounds, Element, Node};
 use crate::geometry::point_to_polygon_form_factor;
 use crate::mesh::Patch;
 use crate::pair::{
-    facing_kernel, mutually_facing, near_pair_level, rays_for_pair, unoccluded_form_factor,
+    FormFactorSettings, facing_kernel, mutually_facing, near_pair_level, rays_for_pair,
+    unoccluded_form_factor,
 };
 use crate::sampling::{pair_seed, splitmix64, stratified_uv};
+use crate::visibility::Occluders;
 use glam::DVec3;
 use std::f64::consts::PI;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Point pairs sampled for the factor of a link that involves a cluster.
 const CLUSTER_SAMPLES: u32 = 16;
@@ -44,7 +46,41 @@ struct PartlyHidden {
     centroid: DVec3,
 }
 
-impl Refiner<'_> {
+/// What computes link factors over one hierarchy, counting the rays it casts and the pairs
+/// its shafts decide; shared by the threads deciding a generation of links.
+pub(super) struct LinkFactors<'a> {
+    pub(super) hierarchy: &'a Hierarchy,
+    occluders: &'a Occluders,
+    rays: FormFactorSettings,
+    rays_cast: AtomicU64,
+    shaft_decided: AtomicU64,
+}
+
+impl<'a> LinkFactors<'a> {
+    /// Factors of `hierarchy`'s pairs with `occluders` between them, shadow rays as `rays` asks.
+    pub(super) fn new(
+        hierarchy: &'a Hierarchy,
+        occluders: &'a Occluders,
+        rays: FormFactorSettings,
+    ) -> Self {
+        LinkFactors {
+            hierarchy,
+            occluders,
+            rays,
+            rays_cast: AtomicU64::new(0),
+            shaft_decided: AtomicU64::new(0),
+        }
+    }
+
+    /// Rays cast and pairs decided by a shaft alone, with the factors given up.
+    pub(super) fn into_counts(self) -> (u64, u64) {
+        (self.rays_cast.into_inner(), self.shaft_decided.into_inner())
+    }
+
+    pub(super) fn node(&self, n: u32) -> &Node {
+        &self.hierarchy.nodes[n as usize]
+    }
+
     /// The factor of a pair before refinement decides, with its spread over the receiver
     /// and how the shaft saw it; `None` when no light can pass between them.
     pub(super) fn estimate(&self, receiver: u32, source: u32) -> Option<Estimate> {
@@ -292,7 +328,6 @@ fn integration_level(p: &Patch, q: &Patch, mean: f64, spread: f64) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hierarchy::Hierarchy;
     use crate::hierarchy::fixtures::add_parallelogram;
     use crate::scene::{Material, Rgb, Scene};
     use glam::dvec3;
@@ -336,11 +371,10 @@ mod tests {
             grey,
         );
         let hierarchy = Hierarchy::cluster_tree(&scene);
-        let occluders = crate::visibility::Occluders::new(&scene);
-        let sources = Default::default();
-        let refiner = Refiner::without_solution(&hierarchy, &occluders, &sources);
+        let occluders = Occluders::new(&scene);
+        let factors = LinkFactors::new(&hierarchy, &occluders, FormFactorSettings::default());
         let (floor, lamp) = (hierarchy.face_node[0], hierarchy.face_node[1]);
-        let hidden = refiner.partly_hidden_factor(floor, lamp, 2, 16);
+        let hidden = factors.partly_hidden_factor(floor, lamp, 2, 16);
         hidden.most_visible - hidden.least_visible
     }
 

@@ -2,7 +2,7 @@
 //! reduces its error most (BF refinement with visibility), until every kept link carries at
 //! most the tolerance; and the leaf budget that bounds how far it may go.
 
-use super::factor::{kernel_centre, tangent_coordinates};
+use super::factor::{LinkFactors, kernel_centre, tangent_coordinates};
 use super::shaft::Visibility;
 use super::tree::{ELEMENT_CHILDREN, MAX_DEPTH, Node};
 use super::{Hierarchy, Link};
@@ -12,7 +12,6 @@ use crate::scene::Rgb;
 use crate::visibility::Occluders;
 use crate::{Limit, Progress};
 use rayon::prelude::*;
-use std::sync::atomic::AtomicU64;
 
 /// What refinement decided for one link.
 enum Decision {
@@ -91,48 +90,17 @@ pub(super) enum Refinement {
 }
 
 /// Read-only state for deciding links in parallel.
-pub(super) struct Refiner<'a> {
-    pub(super) hierarchy: &'a Hierarchy,
-    pub(super) occluders: &'a Occluders,
-    pub(super) rays: FormFactorSettings,
+struct Refiner<'a> {
+    factors: LinkFactors<'a>,
     sources: &'a NodeRadiosity,
     /// How fine to refine (no element splits once the leaf budget froze them).
     target: RefineTarget,
-    pub(super) rays_cast: AtomicU64,
-    pub(super) shaft_decided: AtomicU64,
-}
-
-impl<'a> Refiner<'a> {
-    /// A refiner of `hierarchy` that knows no solution yet (for tests of its factors).
-    #[cfg(test)]
-    pub(super) fn without_solution(
-        hierarchy: &'a Hierarchy,
-        occluders: &'a Occluders,
-        sources: &'a NodeRadiosity,
-    ) -> Self {
-        Refiner {
-            hierarchy,
-            occluders,
-            rays: FormFactorSettings::default(),
-            sources,
-            target: RefineTarget {
-                tolerance: 0.0,
-                smallest: 0.0,
-            },
-            rays_cast: AtomicU64::new(0),
-            shaft_decided: AtomicU64::new(0),
-        }
-    }
 }
 
 impl Refiner<'_> {
-    pub(super) fn node(&self, n: u32) -> &Node {
-        &self.hierarchy.nodes[n as usize]
-    }
-
     /// Keep, drop or split the link from `source` to `receiver`.
     fn decide(&self, receiver: u32, source: u32) -> Decision {
-        let (r, s) = (self.node(receiver), self.node(source));
+        let (r, s) = (self.factors.node(receiver), self.factors.node(source));
         if receiver == source {
             return if r.element.is_none() {
                 Decision::SplitBoth
@@ -147,7 +115,7 @@ impl Refiner<'_> {
         if r.element.is_none() {
             return Decision::SplitReceiver;
         }
-        let Some(estimate) = self.estimate(receiver, source) else {
+        let Some(estimate) = self.factors.estimate(receiver, source) else {
             return Decision::Drop;
         };
         if estimate.visibility == Visibility::Hidden {
@@ -159,7 +127,7 @@ impl Refiner<'_> {
             Some(End::Source) => return Decision::SplitSource,
             None => {}
         }
-        let factor = self.factor(receiver, source, &estimate);
+        let factor = self.factors.factor(receiver, source, &estimate);
         if factor <= 0.0 {
             return Decision::Drop;
         }
@@ -167,7 +135,7 @@ impl Refiner<'_> {
             (Some(e), Visibility::Partial | Visibility::Clear) => {
                 let centroid = estimate.centroid.unwrap_or_else(|| {
                     kernel_centre(
-                        self.hierarchy.element_patch(receiver),
+                        self.factors.hierarchy.element_patch(receiver),
                         &e.patch,
                         pair_seed(receiver as usize, source as usize),
                     )
@@ -221,23 +189,20 @@ impl Hierarchy {
             };
             let mut decide = |pairs: &[(u32, u32)], frozen: bool| {
                 let refiner = Refiner {
-                    hierarchy: self,
-                    occluders,
-                    rays,
+                    factors: LinkFactors::new(self, occluders, rays),
                     sources: &sources,
                     target: RefineTarget {
                         tolerance,
                         smallest: smallest_while(frozen, target.smallest),
                     },
-                    rays_cast: AtomicU64::new(0),
-                    shaft_decided: AtomicU64::new(0),
                 };
                 let decisions: Vec<Decision> = pairs
                     .par_iter()
                     .map(|&(r, s)| refiner.decide(r, s))
                     .collect();
-                rays_cast += refiner.rays_cast.into_inner();
-                shaft_decided += refiner.shaft_decided.into_inner();
+                let (cast, decided) = refiner.factors.into_counts();
+                rays_cast += cast;
+                shaft_decided += decided;
                 decisions
             };
             let frozen = self.stats.leaf_budget_reached;

@@ -3,9 +3,8 @@
 //! the detail, and where each face's points fall in its texture. 8- and 16-bit colour is
 //! sRGB-encoded by convention (glTF's base colour, OBJ's `map_Kd`); float texels are linear.
 
-use crate::scene::{Rgb, SceneError, check_scene_file};
+use crate::scene::Rgb;
 use glam::DVec3;
-use std::path::Path;
 use std::sync::Arc;
 
 /// The sRGB transfer function inverted (IEC 61966-2-1).
@@ -86,40 +85,6 @@ impl Texture {
             mean,
             png: png.into(),
         })
-    }
-
-    /// The image file at `path` (PNG or JPEG), checked like every scene file before it is read.
-    pub fn load(path: &Path) -> Result<Texture, SceneError> {
-        let fail = |reason: String| SceneError::Parse {
-            path: path.into(),
-            reason,
-        };
-        check_scene_file(path)?;
-        let image = image::ImageReader::open(path)
-            .and_then(|reader| reader.with_guessed_format())
-            .map_err(|source| SceneError::Io {
-                path: path.into(),
-                source,
-            })?
-            .decode()
-            .map_err(|e| fail(format!("not an image radcast reads (PNG, JPEG): {e}")))?;
-        let float = matches!(
-            image.color(),
-            image::ColorType::Rgb32F | image::ColorType::Rgba32F
-        );
-        let decode = |c: f32| match float {
-            true => f64::from(c),
-            false => srgb_to_linear(f64::from(c)),
-        };
-        let texels = image.to_rgb32f();
-        Texture::from_linear(
-            texels.width(),
-            texels.height(),
-            texels
-                .pixels()
-                .map(|p| Rgb::new(decode(p[0]), decode(p[1]), decode(p[2]))),
-        )
-        .map_err(fail)
     }
 }
 
@@ -276,7 +241,7 @@ mod tests {
         ] {
             scene.add_polygon(cube, &quad(o, u, v), grey);
         }
-        scene.split_at_contacts();
+        crate::input::contact::split_at_contacts(&mut scene);
         let pieces: Vec<_> = scene.faces.iter().filter(|f| f.object == floor).collect();
         assert!(pieces.len() > 1, "the floor is cut");
         for piece in &pieces {

@@ -1,11 +1,12 @@
 //! A solved scene kept live for edits: emission changes by superposition, moves by updating
 //! only the form factors they can change (or rebuilding a hierarchy).
 
+use super::report::{ObjectRadiosity, SolveReport, StageSeconds};
+use super::request::{SolveError, SolveRequest, check_dense_size};
 use crate::form_factors::{DenseFormFactors, UpdateStats};
 use crate::gather::CornerLight;
 use crate::hierarchy::{Hierarchy, HierarchyStats, Refined};
 use crate::mesh::Mesh;
-use crate::pipeline::{ObjectRadiosity, SolveError, SolveReport, SolveRequest, StageSeconds};
 use crate::scene::{MAX_COORDINATE, Rgb, Scene, check_emission, check_translation};
 use crate::solve::{NeedsEntries, SolveOutcome, System, solve};
 use crate::transport::Transport;
@@ -37,7 +38,7 @@ impl Transfer {
 /// the solver tolerance. Each object costs one or two solves, once.
 pub struct Session {
     scene: Scene,
-    pub(crate) mesh: Mesh,
+    mesh: Mesh,
     transfer: Transfer,
     /// Direct light at the mesh corners, for the values viewers are sent.
     corner_light: CornerLight,
@@ -53,10 +54,10 @@ pub struct Session {
     emission: Vec<Rgb>,
     area: Vec<f64>,
     request: SolveRequest,
-    pub(crate) seconds: StageSeconds,
+    seconds: StageSeconds,
     triangles: usize,
     skipped_faces: usize,
-    pub(crate) radiosity: Vec<Rgb>,
+    radiosity: Vec<Rgb>,
 }
 
 /// What one object's emission does to every patch, W/m^2 per patch.
@@ -109,7 +110,7 @@ impl Session {
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<Session, SolveError> {
         let n = mesh.patches.len();
-        crate::pipeline::check_dense_size(n, scene.faces.len(), request)?;
+        check_dense_size(n, scene.faces.len(), request)?;
         let mut seconds = StageSeconds::default();
         let clock = Instant::now();
         let occluders = Occluders::new(scene);
@@ -208,6 +209,16 @@ impl Session {
             mesh,
             transfer,
         }
+    }
+
+    /// Counts `seconds` more for meshing: the time the caller spent building the mesh it gave.
+    pub(crate) fn add_mesh_seconds(&mut self, seconds: f64) {
+        self.seconds.mesh += seconds;
+    }
+
+    /// The patches and their radiosity, W/m^2, the session's state given up.
+    pub(crate) fn into_solution(self) -> (Mesh, Vec<Rgb>) {
+        (self.mesh, self.radiosity)
     }
 
     /// The scene as it is now (after moves).

@@ -17,10 +17,9 @@
 //! lines and strips-of-lines primitives, and files whose external buffers or images are not
 //! regular files, are refused with the reason.
 
-use crate::scene::{
-    MAX_COORDINATE, MAX_TEXTURE_COORDINATE, Material, Rgb, Scene, SceneError, check_scene_file,
-};
-use crate::texture::{Texture, mean, srgb_to_linear};
+use super::{SceneError, check_scene_file};
+use crate::scene::texture::{Texture, mean, srgb_to_linear};
+use crate::scene::{MAX_COORDINATE, MAX_TEXTURE_COORDINATE, Material, Rgb, Scene};
 use glam::{DMat4, DVec3};
 use std::collections::HashMap;
 use std::path::Path;
@@ -182,7 +181,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
             }
         }
     }
-    scene.finish(path)
+    super::finish(scene, path)
 }
 
 /// The radiosity material of a glTF material (see the module notes).

@@ -12,8 +12,8 @@
 //! piece stays convex and the cuts stay near the contacts. The pieces keep the face's
 //! material, object and orientation and name it as their source ([`Face::source`]).
 
-use crate::geometry::{Polygon, bounds};
-use crate::scene::Face;
+use crate::geometry::{bounds, convex_pieces};
+use crate::scene::{Face, Scene};
 use glam::DVec3;
 use std::collections::HashMap;
 
@@ -28,9 +28,21 @@ const MAX_CELLS_PER_SIDE: f64 = 1024.0;
 /// cells a level and cuts the last ones: a few dozen pieces.
 const MAX_PIECES_PER_SEGMENT: usize = 64;
 
+/// Cuts every face of `scene` along the contact lines of the faces standing on it; each
+/// face's [`Face::source`] becomes its index before the cut.
+pub(crate) fn split_at_contacts(scene: &mut Scene) {
+    for (index, face) in scene.faces.iter_mut().enumerate() {
+        face.source = index as u32;
+    }
+    let triangles = scene.triangle_count();
+    let (faces, cut) = split_faces_at_contacts(std::mem::take(&mut scene.faces));
+    (scene.faces, scene.faces_cut_at_contacts) = (faces, cut);
+    scene.triangles_before_cuts = triangles;
+}
+
 /// `faces` with every face cut along the contact segments of the faces that stand on it, and
 /// how many faces were cut. Pieces of one face follow one another, in the face's place.
-pub(crate) fn split_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
+fn split_faces_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
     let grid = EdgeGrid::new(&faces);
     let mut split = Vec::with_capacity(faces.len());
     let mut cut = 0;
@@ -50,7 +62,7 @@ pub(crate) fn split_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
             cut += 1;
         }
         for piece in pieces {
-            for polygon in convex_polygons(&without_straight_corners(piece)) {
+            for polygon in convex_pieces(&without_straight_corners(piece)) {
                 split.push(Face {
                     polygon,
                     ..face.clone()
@@ -359,19 +371,6 @@ fn without_straight_corners(mut piece: Vec<DVec3>) -> Vec<DVec3> {
     piece
 }
 
-/// A convex polygon as faces: a planar convex quad stays one, anything else becomes a fan of
-/// triangles.
-pub(crate) fn convex_polygons(corners: &[DVec3]) -> Vec<Polygon> {
-    if let [a, b, c, d] = *corners
-        && Polygon::is_planar_convex_quad(a, b, c, d)
-    {
-        return vec![Polygon::quad(a, b, c, d)];
-    }
-    (1..corners.len().saturating_sub(1))
-        .map(|k| Polygon::triangle(corners[0], corners[k], corners[k + 1]))
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -408,7 +407,7 @@ mod tests {
     fn a_floor_is_cut_along_the_footprint_of_a_box_standing_on_it() {
         let scene = box_on_a_floor();
         let floor = scene.faces[0].clone();
-        let (faces, cut) = split_at_contacts(scene.faces.clone());
+        let (faces, cut) = split_faces_at_contacts(scene.faces.clone());
         assert_eq!(cut, 1, "only the floor is cut");
         let pieces: Vec<&Face> = faces.iter().filter(|f| f.object == floor.object).collect();
         // Four segments, few enough to cut by their whole lines: a 3 x 3 grid of quads.
@@ -453,7 +452,7 @@ mod tests {
         // The closed cube of the hierarchy tests: every wall meets its neighbours at their
         // edges, and coplanar tiles of a tessellated floor meet likewise.
         let cube = crate::hierarchy::fixtures::closed_cube();
-        let (faces, cut) = split_at_contacts(cube.faces.clone());
+        let (faces, cut) = split_faces_at_contacts(cube.faces.clone());
         assert_eq!((cut, faces.len()), (0, cube.faces.len()));
         let mut tiles = Scene::default();
         let floor = tiles.add_object("floor");
@@ -469,7 +468,7 @@ mod tests {
                 grey,
             );
         }
-        assert_eq!(split_at_contacts(tiles.faces.clone()).1, 0);
+        assert_eq!(split_faces_at_contacts(tiles.faces.clone()).1, 0);
     }
 
     #[test]
@@ -490,7 +489,7 @@ mod tests {
         let sliver = scene.add_object("sliver");
         let far = dvec3(100.0, 100.0, 100.0);
         scene.add_polygon(sliver, &[DVec3::ZERO, far, far + DVec3::Z * 1e-3], grey);
-        let (faces, cut) = split_at_contacts(scene.faces.clone());
+        let (faces, cut) = split_faces_at_contacts(scene.faces.clone());
         assert_eq!((faces.len(), cut), (scene.faces.len(), 0));
     }
 

@@ -1,0 +1,8 @@
+//! A solution and its vocabulary: what a solve is asked for ([`request`]), what it reports
+//! ([`report`]), the live solution that takes edits ([`session`]), and the offline path from a
+//! scene file to a solved scene ([`pipeline`]).
+
+pub mod pipeline;
+pub mod report;
+pub mod request;
+pub mod session;
