@@ -4,8 +4,10 @@
 //! when it is missing; without it this test says so and skips.
 
 use client::render::{Model, TextureImage, View, render};
-use server::prepared::{prepare, shared_for};
-use server::{Limits, listen, solving};
+use server::Limits;
+use server::http::routes;
+use server::publish::prepare::{prepare, shared_for};
+use server::publish::solver_thread;
 use solver::{PatchTarget, SolveRequest};
 use std::process::Command;
 use std::sync::Arc;
@@ -311,8 +313,8 @@ fn serve(scene: &std::path::Path, listener: tokio::net::TcpListener) -> Arc<serv
     };
     let prepared = prepare(scene, request).unwrap();
     let shared = shared_for(&prepared, Limits::default(), "t".into());
-    tokio::spawn(listen::serve(listener, shared.clone()));
-    solving::start(prepared, shared.clone(), None);
+    tokio::spawn(routes::serve(listener, shared.clone()));
+    solver_thread::start(prepared, shared.clone(), None);
     shared
 }
 

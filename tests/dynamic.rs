@@ -6,8 +6,8 @@ mod common;
 use common::http::{edit_and_wait, get_text, put};
 use common::viewer::Viewer;
 use server::health::Fault;
-use server::prepared::{prepare, shared_for};
-use server::solving;
+use server::publish::prepare::{prepare, shared_for};
+use server::publish::solver_thread;
 use server::{Limits, Shared};
 use solver::{HierarchySettings, MethodChoice, MoveWork, PatchTarget, Rgb, SolveRequest};
 use std::net::SocketAddr;
@@ -42,8 +42,8 @@ async fn live(scene: &str, request: SolveRequest) -> (SocketAddr, Arc<Shared>, E
     let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let address = listener.local_addr().unwrap();
-    tokio::spawn(server::listen::serve(listener, shared.clone()));
-    solving::start(prepared, shared.clone(), None);
+    tokio::spawn(server::http::routes::serve(listener, shared.clone()));
+    solver_thread::start(prepared, shared.clone(), None);
     let edit_loop = EditLoop(shared.clone());
     (address, shared, edit_loop)
 }

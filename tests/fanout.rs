@@ -10,8 +10,9 @@ use common::http::{edit_and_wait, get, get_text, put};
 use common::viewer::Viewer;
 use futures_util::StreamExt;
 use server::fanout::{self, Nats, edge::Edge};
-use server::prepared::{prepare, shared_for};
-use server::{Limits, Process, Shared, solving};
+use server::publish::prepare::{prepare, shared_for};
+use server::publish::solver_thread;
+use server::{Limits, Process, Shared};
 use solver::{PatchTarget, SolveRequest};
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -72,8 +73,8 @@ async fn origin_of(url: &str, name: &str, scene: &str) -> Origin {
     let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let address = listener.local_addr().unwrap();
-    tokio::spawn(server::listen::serve(listener, shared.clone()));
-    solving::start(prepared, shared.clone(), None);
+    tokio::spawn(server::http::routes::serve(listener, shared.clone()));
+    solver_thread::start(prepared, shared.clone(), None);
     let run = format!("run-{name}-{}", wire::unix_micros_now());
     let nats = connect(url, "test origin").await;
     tokio::spawn(fanout::origin::serve(
@@ -112,7 +113,7 @@ async fn edge(url: &str, root: impl Into<Option<&str>>) -> EdgeServer {
     tokio::spawn(fanout::follow::follow(edge.clone()));
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let address = listener.local_addr().unwrap();
-    tokio::spawn(server::listen::serve_router(
+    tokio::spawn(server::http::listen::serve_router(
         listener,
         fanout::edge::router(edge.clone()),
         process.clone(),

@@ -1,11 +1,12 @@
 //! The server and viewers over real sockets on loopback: one solve, many viewers.
 
 use futures_util::{SinkExt, StreamExt};
-use server::admission::Refusal;
-use server::hub::Hub;
-use server::prepared::{prepare, shared_for};
-use server::solving::solve_and_publish;
-use server::{Limits, Shared, routes};
+use server::http::admission::Refusal;
+use server::http::routes;
+use server::publish::hub::Hub;
+use server::publish::prepare::{prepare, shared_for};
+use server::publish::solver_thread::solve_and_publish;
+use server::{Limits, Shared};
 use solver::{PatchTarget, SolveRequest};
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -24,7 +25,7 @@ async fn serve(shared: Arc<Shared>) -> SocketAddr {
         .await
         .expect("bind an ephemeral port");
     let address = listener.local_addr().unwrap();
-    tokio::spawn(server::listen::serve(listener, shared));
+    tokio::spawn(server::http::routes::serve(listener, shared));
     address
 }
 
@@ -268,7 +269,7 @@ async fn a_stalled_viewer_neither_delays_others_nor_holds_memory() {
     // The stalled viewer was dropped for it (its socket buffers full), which frees its state.
     let metrics = &shared.metrics;
     let deadline = tokio::time::Instant::now() + PATIENCE;
-    while metrics.dropped_count(server::metrics::DropReason::Slow) == 0 {
+    while metrics.dropped_count(server::http::metrics::DropReason::Slow) == 0 {
         assert!(
             tokio::time::Instant::now() < deadline,
             "the stalled viewer was never dropped"
@@ -307,7 +308,7 @@ async fn garbage_and_oversized_messages_are_refused_without_harming_others() {
     }
     let metrics = &shared.metrics;
     assert_eq!(
-        metrics.dropped_count(server::metrics::DropReason::BadMessage),
+        metrics.dropped_count(server::http::metrics::DropReason::BadMessage),
         3
     );
     // The healthy viewer still gets new versions.
@@ -349,7 +350,7 @@ async fn viewers_past_the_limit_are_refused_cleanly() {
         .expect_err("third is refused");
     assert!(refused.to_string().contains("503"), "{refused}");
     assert_eq!(shared.process.viewers.refused(Refusal::ServerFull), 1);
-    let text = server::metrics::render(&shared);
+    let text = server::http::metrics::render(&shared);
     assert!(
         text.contains("radcast_viewers 2\n")
             && text.contains("radcast_viewers_refused_total{limit=\"server\"} 1\n"),
@@ -722,7 +723,10 @@ async fn a_hierarchical_restart_serves_its_cached_leaves_and_edits_them_without_
         (a.checksum, true, &a.report)
     );
     assert!(
-        matches!(solution, server::solving::Solution::Cached(_)),
+        matches!(
+            solution,
+            server::publish::solver_thread::Solution::Cached(_)
+        ),
         "no refinement"
     );
     // Input faces, then the leaves: both starts serve the same leaves as geometry 2.
@@ -733,7 +737,7 @@ async fn a_hierarchical_restart_serves_its_cached_leaves_and_edits_them_without_
     second.edits.set_emission("light", [5.0, 5.0, 5.0]);
     let solver_side = second.clone();
     let edits = tokio::task::spawn_blocking(move || {
-        server::solving::serve_edits(&prepared, &solver_side, solution)
+        server::publish::solver_thread::serve_edits(&prepared, &solver_side, solution)
     });
     tokio::time::timeout(PATIENCE, finished.wait_for(|n| *n >= 1))
         .await

@@ -5,8 +5,9 @@
 mod common;
 
 use common::http::{get, get_text};
-use server::prepared::{prepare, shared_for};
-use server::{Limits, solving};
+use server::Limits;
+use server::publish::prepare::{prepare, shared_for};
+use server::publish::solver_thread;
 use solver::{PatchTarget, SolveRequest};
 use std::time::Duration;
 use wire::geometry::NO_TEXTURE;
@@ -24,8 +25,8 @@ async fn textures_travel_with_the_geometry_and_are_served_once_as_png() {
     let shared = shared_for(&prepared, Limits::default(), "t".into());
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let address = listener.local_addr().unwrap();
-    tokio::spawn(server::listen::serve(listener, shared.clone()));
-    solving::start(prepared, shared.clone(), None);
+    tokio::spawn(server::http::routes::serve(listener, shared.clone()));
+    solver_thread::start(prepared, shared.clone(), None);
     let mut published = shared.hub.subscribe();
     tokio::time::timeout(Duration::from_secs(60), published.wait_for(|p| p.is_final))
         .await

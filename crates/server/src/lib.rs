@@ -2,24 +2,19 @@
 //! background solve that feeds it. `main.rs` only parses flags and binds a socket, so tests run
 //! the same server on an ephemeral port.
 
-pub mod admission;
-pub mod cache;
 pub mod control;
-pub mod edits;
 pub mod fanout;
 pub mod health;
-pub mod hub;
-pub mod listen;
-pub mod metrics;
-pub mod page;
-pub mod prepared;
-pub mod routes;
-pub mod solving;
-pub mod viewer;
+pub mod http;
+pub mod publish;
 
 use std::sync::Arc;
 use std::time::Duration;
 use tokio_util::sync::CancellationToken;
+
+/// How long a request in progress may still run once shutdown begins; viewers get their
+/// close frame on their own (see [`http::viewer`]).
+pub const SHUTDOWN_GRACE: Duration = Duration::from_secs(1);
 
 /// Limits that protect the server from viewers.
 #[derive(Clone, Copy, Debug)]
@@ -75,9 +70,9 @@ pub struct Process {
     /// Every connection and viewer task, so shutdown can wait for their close frames.
     pub tasks: tokio_util::task::TaskTracker,
     /// Viewers connected now, under the viewer caps.
-    pub viewers: Arc<admission::Gate>,
+    pub viewers: Arc<http::admission::Gate>,
     /// TCP connections open now (viewers included), under the connection caps.
-    pub connections: Arc<admission::Gate>,
+    pub connections: Arc<http::admission::Gate>,
 }
 
 impl Process {
@@ -87,8 +82,8 @@ impl Process {
             limits,
             shutdown: Default::default(),
             tasks: Default::default(),
-            viewers: admission::Gate::new(limits.max_viewers, limits.max_viewers_per_ip),
-            connections: admission::Gate::new(
+            viewers: http::admission::Gate::new(limits.max_viewers, limits.max_viewers_per_ip),
+            connections: http::admission::Gate::new(
                 limits.max_connections,
                 limits.max_connections_per_ip,
             ),
@@ -101,13 +96,13 @@ pub struct Shared {
     /// The process this scene is served by.
     pub process: Arc<Process>,
     /// The published solution.
-    pub hub: Arc<hub::Hub>,
+    pub hub: Arc<publish::hub::Hub>,
     /// Counters.
-    pub metrics: metrics::Metrics,
+    pub metrics: http::metrics::Metrics,
     /// The last solve's report once the first is done, for `/api/solution`.
     pub report: std::sync::Mutex<Option<wire::summary::SolveReport>>,
     /// Edits waiting for the solver thread.
-    pub edits: edits::Edits,
+    pub edits: control::edits::Edits,
     /// The bearer token the control API requires (never empty).
     pub token: String,
     /// Faults the solver thread (or, on an edge, the feed) reported.
@@ -124,14 +119,14 @@ pub struct Shared {
 impl Shared {
     /// Shared state over `hub` in a process of its own, with nothing connected, no report yet
     /// and no faults.
-    pub fn new(hub: hub::Hub, limits: Limits, token: String) -> Arc<Shared> {
+    pub fn new(hub: publish::hub::Hub, limits: Limits, token: String) -> Arc<Shared> {
         Self::in_process(Process::new(limits), hub, token, None)
     }
 
     /// Shared state over `hub` for one of the scenes `process` serves.
     pub fn in_process(
         process: Arc<Process>,
-        hub: hub::Hub,
+        hub: publish::hub::Hub,
         token: String,
         upstream: Option<fanout::Upstream>,
     ) -> Arc<Shared> {

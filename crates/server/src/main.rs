@@ -2,8 +2,10 @@
 
 use anyhow::Context;
 use clap::Parser;
-use server::prepared::{prepare, shared_for};
-use server::{Limits, fanout, listen, solving};
+use server::http::listen;
+use server::publish::prepare::{prepare, shared_for};
+use server::publish::solver_thread;
+use server::{Limits, fanout};
 use solver::args::SolveArgs;
 use std::io::Write;
 use std::path::PathBuf;
@@ -166,7 +168,7 @@ async fn run_origin(
 
     let cache_dir = (!args.no_cache).then_some(args.cache_dir);
     // A plain thread: the process exits on a signal without waiting for a long solve.
-    solving::start(prepared, shared.clone(), cache_dir);
+    solver_thread::start(prepared, shared.clone(), cache_dir);
     if let Some(url) = &args.nats {
         let name = args
             .name
@@ -178,7 +180,7 @@ async fn run_origin(
         tracing::info!("publishing scene '{name}' to NATS at {url}");
         tokio::spawn(fanout::origin::serve(shared.clone(), nats, name, run));
     }
-    let router = server::routes::router(shared.clone());
+    let router = server::http::routes::router(shared.clone());
     let served = serve_until_signal(listener, router, &shared.process).await;
     shared.edits.close();
     served

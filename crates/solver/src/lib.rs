@@ -36,7 +36,7 @@ pub use pair::FormFactorSettings;
 pub use scene::{Material, Rgb, Scene, View};
 pub use solution::pipeline::{Solved, solve_file, solve_mesh, solve_scene};
 pub use solution::report::{ObjectRadiosity, SolveReport, StageSeconds};
-pub use solution::request::{MethodChoice, SolveError, SolveRequest, dense_mesh};
+pub use solution::request::{MethodChoice, SolveError, SolveRequest, starting_mesh};
 pub use solution::session::{EditError, MoveReport, MoveWork, Session};
 pub use solve::{Method, SolveOutcome, SolverSettings, System, solve};
 pub use transport::{Entries, Transport};

@@ -8,7 +8,7 @@ use super::{
     record_object, texture_object,
 };
 use crate::Shared;
-use crate::hub::{GeometryState, Hub, Published};
+use crate::publish::hub::{GeometryState, Hub, Published};
 use async_nats::jetstream::object_store;
 use bytes::Bytes;
 use futures_util::StreamExt;
@@ -272,7 +272,7 @@ impl Edge {
         // Before anyone can ask: /api/solution must not answer without the report.
         take_record(&shared, scene, snapshot.record, snapshot.record_version);
         let served = Arc::new(Served {
-            router: crate::routes::router(shared.clone()),
+            router: crate::http::routes::router(shared.clone()),
             shared: shared.clone(),
         });
         let mut previous = None;

@@ -2,7 +2,7 @@
 //! command and the server both run. The live, editable form of a solution is [`Session`].
 
 use super::report::SolveReport;
-use super::request::{SolveError, SolveRequest, dense_mesh};
+use super::request::{SolveError, SolveRequest, starting_mesh};
 use super::session::Session;
 use crate::Progress;
 use crate::mesh::Mesh;
@@ -70,17 +70,11 @@ pub fn solve_scene(
             text: "no material emits light (no positive Ke): every radiosity is 0",
         });
     }
-    let session = match &request.hierarchy {
-        Some(_) => Session::hierarchical(&scene, request, progress)?,
-        None => {
-            let start = Instant::now();
-            let mesh = dense_mesh(&scene, request)?;
-            let mesh_seconds = start.elapsed().as_secs_f64();
-            let mut session = Session::new(&scene, &mesh, request, progress)?;
-            session.add_mesh_seconds(mesh_seconds);
-            session
-        }
-    };
+    let start = Instant::now();
+    let mesh = starting_mesh(&scene, request)?;
+    let mesh_seconds = start.elapsed().as_secs_f64();
+    let mut session = Session::start(&scene, &mesh, request, progress)?;
+    session.add_mesh_seconds(mesh_seconds);
     Ok(Solved::from_session(scene, session, progress))
 }
 

@@ -104,6 +104,15 @@ pub fn dense_mesh(scene: &Scene, request: &SolveRequest) -> Result<Mesh, SolveEr
     Ok(Mesh::build(scene, request.patches))
 }
 
+/// The mesh a solve of `request` starts from: the uniform mesh ([`dense_mesh`]), or one patch
+/// per face for a hierarchy, whose refinement decides the leaves later.
+pub fn starting_mesh(scene: &Scene, request: &SolveRequest) -> Result<Mesh, SolveError> {
+    match request.hierarchy {
+        Some(_) => Ok(Mesh::build(scene, PatchTarget::EdgeLength(f64::INFINITY))),
+        None => dense_mesh(scene, request),
+    }
+}
+
 /// `Err(TooLarge)` when a dense matrix over `patches` would exceed `request.max_matrix_bytes`.
 pub fn check_dense_size(
     patches: usize,

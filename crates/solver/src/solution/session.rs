@@ -102,6 +102,21 @@ pub enum MoveWork {
 }
 
 impl Session {
+    /// The session `request` asks for over `mesh` (from [`super::request::starting_mesh`]):
+    /// the dense form factors of `mesh`, or the hierarchy refined from `scene`, whose leaves
+    /// replace `mesh`. Nothing is solved yet.
+    pub fn start(
+        scene: &Scene,
+        mesh: &Mesh,
+        request: &SolveRequest,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<Session, SolveError> {
+        match request.hierarchy {
+            Some(_) => Session::hierarchical(scene, request, progress),
+            None => Session::new(scene, mesh, request, progress),
+        }
+    }
+
     /// Computes the form factors of `mesh`; nothing is solved yet.
     pub fn new(
         scene: &Scene,

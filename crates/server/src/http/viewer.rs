@@ -2,9 +2,8 @@
 //! when the viewer holds its base), until the viewer leaves, misbehaves or stalls.
 
 use crate::Shared;
-use crate::admission::Pass;
-use crate::listen::SHUTDOWN_GRACE;
-use crate::metrics::DropReason;
+use crate::http::admission::Pass;
+use crate::http::metrics::DropReason;
 use axum::extract::ws::{CloseFrame, Message, WebSocket, close_code};
 use bytes::Bytes;
 use futures_util::{SinkExt, StreamExt};
@@ -155,7 +154,7 @@ pub async fn serve_viewer(socket: WebSocket, shared: Arc<Shared>, _place: Pass) 
     if let Some(message) = farewell {
         // Best effort: a stalled viewer may not take even this, and shutdown does not wait.
         let patience = match shared.process.shutdown.is_cancelled() {
-            true => limits.send_timeout.min(SHUTDOWN_GRACE),
+            true => limits.send_timeout.min(crate::SHUTDOWN_GRACE),
             false => limits.send_timeout,
         };
         let _ = timeout(patience, sink.send(message)).await;

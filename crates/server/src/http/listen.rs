@@ -4,8 +4,8 @@
 //! can neither take every file descriptor nor hold memory, and one address cannot take the
 //! server. On shutdown the loop stops accepting and open requests get a short grace.
 
-use crate::admission::{Pass, Refusal};
-use crate::{Process, Shared};
+use crate::Process;
+use crate::http::admission::{Pass, Refusal};
 use axum::extract::ConnectInfo;
 use hyper_util::rt::{TokioIo, TokioTimer};
 use std::net::SocketAddr;
@@ -21,10 +21,6 @@ use tower::ServiceExt;
 /// WebSocket upgrade is about 1 KB; hyper's default (~400 KB) let 20,000 trickling sockets hold
 /// 431 MB.
 pub const MAX_REQUEST_HEAD_BYTES: usize = 16 * 1024;
-
-/// How long a request in progress may still run once shutdown begins; viewers get their
-/// close frame on their own (see [`crate::viewer`]).
-pub const SHUTDOWN_GRACE: Duration = Duration::from_secs(1);
 
 /// A connection refused before reading anything is told so in one short write, at most this slow.
 const REFUSAL_WRITE_TIMEOUT: Duration = Duration::from_secs(1);
@@ -92,12 +88,6 @@ pub fn refusal_response(refusal: Refusal, peer: SocketAddr) -> String {
         "HTTP/1.1 {status}\r\ncontent-type: text/plain\r\ncontent-length: {}\r\nretry-after: 1\r\nconnection: close\r\n\r\n{body}",
         body.len()
     )
-}
-
-/// Serves one scene's routes on `listener` until its process shuts down.
-pub async fn serve(listener: TcpListener, shared: Arc<Shared>) -> std::io::Result<()> {
-    let router = crate::routes::router(shared.clone());
-    serve_router(listener, router, shared.process.clone()).await
 }
 
 /// Serves `router` on `listener` until `process.shutdown` is cancelled. Each connection (and
@@ -170,7 +160,7 @@ async fn connection(
         _ = connection.as_mut() => {}
         _ = process.shutdown.cancelled() => {
             connection.as_mut().graceful_shutdown();
-            let _ = tokio::time::timeout(SHUTDOWN_GRACE, connection).await;
+            let _ = tokio::time::timeout(crate::SHUTDOWN_GRACE, connection).await;
         }
     }
 }

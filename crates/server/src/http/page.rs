@@ -11,27 +11,27 @@ const FILES: [(&str, &str, &str); 5] = [
     (
         "/",
         "text/html; charset=utf-8",
-        include_str!("../web/index.html"),
+        include_str!("../../web/index.html"),
     ),
     (
         "/viewer.js",
         "text/javascript; charset=utf-8",
-        include_str!("../web/viewer.js"),
+        include_str!("../../web/viewer.js"),
     ),
     (
         "/protocol.js",
         "text/javascript; charset=utf-8",
-        include_str!("../web/protocol.js"),
+        include_str!("../../web/protocol.js"),
     ),
     (
         "/display.js",
         "text/javascript; charset=utf-8",
-        include_str!("../web/display.js"),
+        include_str!("../../web/display.js"),
     ),
     (
         "/control.js",
         "text/javascript; charset=utf-8",
-        include_str!("../web/control.js"),
+        include_str!("../../web/control.js"),
     ),
 ];
 

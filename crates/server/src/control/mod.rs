@@ -3,6 +3,8 @@
 //! over NATS and the origin's responder ([`crate::fanout::origin`]) calls [`apply`], so a
 //! request gets the same answer wherever it is sent.
 
+pub mod edits;
+
 use crate::Shared;
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};

@@ -1,8 +1,8 @@
 //! Counters for `/metrics`, in the Prometheus text format.
 
 use crate::Shared;
-use crate::admission::{Gate, Refusal};
 use crate::health::{Fault, Status};
+use crate::http::admission::{Gate, Refusal};
 use std::fmt::Write;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -31,7 +31,7 @@ impl DropReason {
 }
 
 /// The server's counters; all updates are lock-free except the solve timings. Viewer and
-/// connection counts live in their [`crate::admission::Gate`]s, faults in [`crate::health`].
+/// connection counts live in their [`crate::http::admission::Gate`]s, faults in [`crate::health`].
 #[derive(Debug, Default)]
 pub struct Metrics {
     /// Frames (full and delta) sent.

@@ -1,10 +1,10 @@
 //! HTTP routes; each handler is a thin wrapper over plain data in [`Shared`].
 
 use crate::Shared;
-use crate::admission::Refusal;
 use crate::control::Field;
 use crate::health::Status;
-use crate::viewer::serve_viewer;
+use crate::http::admission::Refusal;
+use crate::http::viewer::serve_viewer;
 use axum::Router;
 use axum::extract::ConnectInfo;
 use axum::extract::Path;
@@ -16,6 +16,7 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::{get, put};
 use std::net::SocketAddr;
 use std::sync::Arc;
+use tokio::net::TcpListener;
 use wire::SolutionSummary;
 
 /// The router: the browser viewer at `/`, `/healthz`, `/api/scene`, `/api/scene.glb`,
@@ -33,7 +34,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/metrics", get(metrics))
         .route("/api/objects/{name}/emission", put(set_emission))
         .route("/api/objects/{name}/transform", put(set_transform))
-        .merge(crate::page::routes())
+        .merge(crate::http::page::routes())
         .with_state(shared)
 }
 
@@ -138,7 +139,7 @@ async fn solution(State(shared): State<Arc<Shared>>) -> Response {
 }
 
 async fn metrics(State(shared): State<Arc<Shared>>) -> Response {
-    let text = crate::metrics::render(&shared);
+    let text = crate::http::metrics::render(&shared);
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
 }
 
@@ -244,6 +245,12 @@ async fn set_transform(
     body: axum::body::Bytes,
 ) -> Response {
     edit(&shared, &name, &headers, &body, Field::Translate).await
+}
+
+/// Serves one scene's routes on `listener` until its process shuts down.
+pub async fn serve(listener: TcpListener, shared: Arc<Shared>) -> std::io::Result<()> {
+    let router = router(shared.clone());
+    super::listen::serve_router(listener, router, shared.process.clone()).await
 }
 
 #[cfg(test)]

@@ -2,16 +2,17 @@
 //! publishing one new version. Faults are reported through [`crate::health`], never swallowed:
 //! a refused edit or a failed cache write degrades `/healthz`, and a solver that stops says why.
 
+use super::cache::{self, CachedSolution, Rejected};
+use super::prepare::Prepared;
+use super::to_wire::{emission_only, geometry_of, report_for_viewers, to_f32};
 use crate::Shared;
-use crate::cache::{self, CachedSolution, Rejected};
 use crate::health::Fault;
-use crate::prepared::{Prepared, emission_only, geometry_of};
 use glam::DVec3;
 use solver::{MoveWork, Progress, ProgressLine, ProgressThrottle, Rgb, Session};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use wire::summary::{HierarchyCounts, ObjectRadiosity, SolveReport, StageSeconds};
+use wire::summary::SolveReport;
 
 /// Progressive frames are published at most this often while the solver iterates.
 const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(100);
@@ -39,13 +40,8 @@ impl ProgressLog {
     }
 }
 
-/// Radiosity as the hub takes it.
-pub fn to_f32(radiosity: &[Rgb]) -> Vec<[f32; 3]> {
-    radiosity.iter().map(|b| b.as_vec3().to_array()).collect()
-}
-
 /// Starts the solver thread: [`solve_and_publish`], then [`serve_edits`] until
-/// [`crate::edits::Edits::close`]. An error or a panic in it is reported as
+/// [`crate::control::edits::Edits::close`]. An error or a panic in it is reported as
 /// [`Fault::SolverStopped`]; viewers keep the last published version. A plain thread, not
 /// tokio's blocking pool, so that shutdown never waits for a long solve.
 pub fn start(
@@ -235,7 +231,11 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, solution: Solution) -> 
 /// carry an object past the coordinate bound, say: each PUT was valid, their sum is not) is
 /// reported as [`Fault::Edit`] while the rest of the batch is applied; a solve that gives
 /// non-finite values is an error, and nothing of it is published.
-fn apply(session: &mut Session, shared: &Shared, batch: crate::edits::Batch) -> anyhow::Result<()> {
+fn apply(
+    session: &mut Session,
+    shared: &Shared,
+    batch: crate::control::edits::Batch,
+) -> anyhow::Result<()> {
     let started = Instant::now();
     let mut refused = Vec::new();
     let mut moved = false;
@@ -304,48 +304,5 @@ fn finite(radiosity: Vec<[f32; 3]>) -> anyhow::Result<Vec<[f32; 3]>> {
     match radiosity.iter().flatten().all(|c| c.is_finite()) {
         true => Ok(radiosity),
         false => anyhow::bail!("the solve gave radiosity that is not finite (not published)"),
-    }
-}
-
-/// The solver's report as `/api/solution` gives it.
-fn report_for_viewers(report: &solver::SolveReport) -> SolveReport {
-    let s = report.seconds;
-    SolveReport {
-        patches: report.patches,
-        triangles: report.triangles,
-        skipped_faces: report.skipped_faces,
-        method: report.method.clone(),
-        iterations: report.iterations,
-        residual: report.residual,
-        converged: report.converged,
-        tolerance: report.tolerance,
-        rays: report.rays,
-        seconds: StageSeconds {
-            load: s.load,
-            mesh: s.mesh,
-            form_factors: s.form_factors,
-            solve: s.solve,
-            total: s.total,
-        },
-        objects: report
-            .objects
-            .iter()
-            .map(|o| ObjectRadiosity {
-                name: o.name.clone(),
-                area: o.area,
-                radiosity: o.radiosity,
-            })
-            .collect(),
-        hierarchy: report.hierarchy.map(|h| HierarchyCounts {
-            elements: h.elements,
-            links: h.links,
-            clusters: h.clusters,
-            rounds: h.rounds,
-            shaft_decided: h.shaft_decided,
-            refinement_iterations: h.refinement_iterations,
-            knob_used: h.knob_used,
-            leaf_budget_reached: h.leaf_budget_reached,
-            link_budget_reached: h.link_budget_reached,
-        }),
     }
 }

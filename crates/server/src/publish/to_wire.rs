@@ -1,0 +1,160 @@
+//! Solver values as the wire carries them: the only place solver and wire types meet.
+
+use glam::DVec3;
+use solver::{Mesh, Rgb, Scene};
+use wire::geometry::{NO_CORNER, NO_TEXTURE, SurfaceTextures};
+use wire::summary::{HierarchyCounts, ObjectRadiosity, SolveReport, StageSeconds};
+use wire::{Camera, Geometry};
+
+/// Radiosity as the hub takes it.
+pub fn to_f32(radiosity: &[Rgb]) -> Vec<[f32; 3]> {
+    radiosity.iter().map(|b| b.as_vec3().to_array()).collect()
+}
+
+/// The geometry viewers fetch for `mesh`.
+pub fn geometry_of(scene: &Scene, mesh: &Mesh) -> Geometry {
+    let to_f32 = |v: DVec3| v.as_vec3().to_array();
+    Geometry {
+        positions: mesh.positions.iter().map(|p| to_f32(*p)).collect(),
+        patches: mesh
+            .patches
+            .iter()
+            .map(|p| {
+                if p.corner_count() == 4 {
+                    p.corners
+                } else {
+                    [p.corners[0], p.corners[1], p.corners[2], NO_CORNER]
+                }
+            })
+            .collect(),
+        patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
+        objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
+        camera: scene.view.map(|v| Camera {
+            eye: to_f32(v.eye),
+            target: to_f32(v.target),
+            up: to_f32(v.up),
+            vertical_fov_degrees: v.vertical_fov_degrees as f32,
+        }),
+        textures: surface_textures(scene, mesh),
+    }
+}
+
+/// Each patch's texture and each corner's coordinates in it, for a scene with textures.
+fn surface_textures(scene: &Scene, mesh: &Mesh) -> Option<SurfaceTextures> {
+    if scene.textures.is_empty() {
+        return None;
+    }
+    let mut uvs = vec![[0.0f32; 2]; mesh.positions.len()];
+    let patch_textures = mesh
+        .patches
+        .iter()
+        .map(|patch| match &scene.faces[patch.face as usize].texture {
+            Some(map) => {
+                for &c in &patch.corners[..patch.corner_count()] {
+                    let uv = map.uv_at(mesh.positions[c as usize]).map(|x| x as f32);
+                    // Bounded at load (±1e6), so finite; viewers would refuse the whole
+                    // geometry for one that is not.
+                    uvs[c as usize] = uv.map(|x| if x.is_finite() { x } else { 0.0 });
+                }
+                map.texture
+            }
+            None => NO_TEXTURE,
+        })
+        .collect();
+    Some(SurfaceTextures {
+        means: scene
+            .textures
+            .iter()
+            .map(|t| t.mean.as_vec3().to_array())
+            .collect(),
+        patch_textures,
+        uvs,
+    })
+}
+
+/// The state viewers see before the solve: every vertex at its face's emission.
+pub fn emission_only(mesh: &Mesh) -> Vec<[f32; 3]> {
+    to_f32(&mesh.corner_means(&mesh.patches.iter().map(|p| p.emission).collect::<Vec<_>>()))
+}
+
+/// The solver's report as `/api/solution` gives it.
+pub fn report_for_viewers(report: &solver::SolveReport) -> SolveReport {
+    let s = report.seconds;
+    SolveReport {
+        patches: report.patches,
+        triangles: report.triangles,
+        skipped_faces: report.skipped_faces,
+        method: report.method.clone(),
+        iterations: report.iterations,
+        residual: report.residual,
+        converged: report.converged,
+        tolerance: report.tolerance,
+        rays: report.rays,
+        seconds: StageSeconds {
+            load: s.load,
+            mesh: s.mesh,
+            form_factors: s.form_factors,
+            solve: s.solve,
+            total: s.total,
+        },
+        objects: report
+            .objects
+            .iter()
+            .map(|o| ObjectRadiosity {
+                name: o.name.clone(),
+                area: o.area,
+                radiosity: o.radiosity,
+            })
+            .collect(),
+        hierarchy: report.hierarchy.map(|h| HierarchyCounts {
+            elements: h.elements,
+            links: h.links,
+            clusters: h.clusters,
+            rounds: h.rounds,
+            shaft_decided: h.shaft_decided,
+            refinement_iterations: h.refinement_iterations,
+            knob_used: h.knob_used,
+            leaf_budget_reached: h.leaf_budget_reached,
+            link_budget_reached: h.link_budget_reached,
+        }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use solver::{HierarchySettings, MethodChoice, SolveRequest, solve_file};
+    use std::path::Path;
+
+    /// What `radcast solve --json` prints and what `/api/solution` carries as `report`: one
+    /// schema, key for key and value for value, for both methods.
+    #[test]
+    fn the_report_viewers_get_is_the_solver_report_key_for_key() {
+        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.obj");
+        let coarse = HierarchySettings {
+            error: 0.5,
+            ..HierarchySettings::default()
+        };
+        for method in [
+            MethodChoice::Dense(solver::Method::Gmres),
+            MethodChoice::Hierarchical,
+        ] {
+            let request = SolveRequest {
+                patches: solver::PatchTarget::Count(100),
+                ..SolveRequest::default()
+            }
+            .with_method(method, coarse);
+            let report = solve_file(&scene, &request, &solver::no_progress)
+                .expect("the shipped scene solves")
+                .report;
+            let printed = serde_json::to_value(&report).expect("the report serialises");
+            let served = serde_json::to_value(report_for_viewers(&report)).expect("serialises");
+            assert_eq!(printed, served, "{method}");
+            assert_eq!(
+                printed.get("elements").is_some(),
+                method == MethodChoice::Hierarchical,
+                "hierarchy counts only for the hierarchy: {printed}"
+            );
+        }
+    }
+}
