@@ -176,3 +176,86 @@ pub fn run(
     report.seconds = started.elapsed().as_secs_f64();
     Ok(report)
 }
+/// The arguments of `radcast fuzz`.
+#[derive(clap::Args)]
+pub struct FuzzCommand {
+    /// What to fuzz.
+    #[arg(value_enum)]
+    pub target: FuzzTarget,
+    /// Stop after this many cases.
+    #[arg(long)]
+    pub cases: Option<u64>,
+    /// Stop after this many seconds (with --cases: whichever comes first).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Seed: the same seed and case number give the same input.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Where findings' inputs are saved.
+    #[arg(long, default_value = "fuzz-findings")]
+    pub findings: PathBuf,
+    /// Folders of scene files to mutate (`scene` target).
+    #[arg(long, default_values = ["scenes", "tests/fuzz/scenes"])]
+    pub corpus: Vec<PathBuf>,
+}
+
+/// What `radcast fuzz` aims at.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum FuzzTarget {
+    /// OBJ and MTL files through the loader, meshing and a small solve.
+    Scene,
+    /// Every wire decoder and the viewer's colour buffer.
+    Wire,
+}
+
+impl FuzzCommand {
+    /// Runs the command.
+    pub fn run(self) -> anyhow::Result<()> {
+        let FuzzCommand {
+            target,
+            cases,
+            seconds,
+            seed,
+            findings,
+            corpus,
+        } = self;
+        anyhow::ensure!(
+            cases.is_some() || seconds.is_some(),
+            "give --cases N, --seconds T or both"
+        );
+        let time = seconds
+            .map(|s| Duration::try_from_secs_f64(s).context("--seconds must be >= 0"))
+            .transpose()?;
+        let target: Box<dyn Target> = match target {
+            FuzzTarget::Scene => Box::new(scene::SceneTarget::from_folders(
+                &corpus.iter().map(PathBuf::as_path).collect::<Vec<_>>(),
+            )?),
+            FuzzTarget::Wire => Box::new(wire::WireTarget::default()),
+        };
+        let budget = Budget { cases, time };
+        let report = run(target.as_ref(), seed, budget, &findings)?;
+        println!(
+            "{}: {} cases in {:.1} s (seed {seed}): {} accepted, {} rejected with an error, {} findings; slowest case {} took {:.3} s",
+            target.name(),
+            report.cases,
+            report.seconds,
+            report.accepted,
+            report.rejected,
+            report.findings.len(),
+            report.slowest.0,
+            report.slowest.1
+        );
+        for finding in &report.findings {
+            println!(
+                "  case {}: {} (input in {})",
+                finding.case,
+                finding.what,
+                finding.saved.display()
+            );
+        }
+        if !report.findings.is_empty() {
+            std::process::exit(1);
+        }
+        Ok(())
+    }
+}

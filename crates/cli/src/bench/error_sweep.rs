@@ -125,7 +125,7 @@ pub fn run(
                 peak_bytes = peak_bytes.max(crate::HEAP.peak_usage());
             }
             let stage = |f: fn(&solver::SolveReport) -> f64| {
-                crate::median(runs.iter().map(|r| f(&r.report)).collect())
+                super::median(runs.iter().map(|r| f(&r.report)).collect())
             };
             let (mesh, ff, solve) = (
                 stage(|r| r.seconds.mesh),

@@ -1,0 +1,71 @@
+//! `radcast reference`: path-traced probes, a reference that depends on no mesh.
+
+use crate::{ProgressPrinter, create_parent};
+use anyhow::Context;
+use solver::reference::{Reference, place_probes, trace_probes};
+use solver::visibility::Occluders;
+use std::path::PathBuf;
+
+/// The arguments of `radcast reference`.
+#[derive(clap::Args)]
+pub struct ReferenceCommand {
+    /// The scene: OBJ (with its MTL) or glTF 2.0 (`.gltf`, `.glb`).
+    pub scene: PathBuf,
+    /// Probe points, spread over the surfaces by area.
+    #[arg(long, default_value_t = 1000)]
+    pub probes: usize,
+    /// Paths per probe.
+    #[arg(long, default_value_t = 16384)]
+    pub samples: u32,
+    /// Seed of the random streams.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Where to write the JSON.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+impl ReferenceCommand {
+    /// Runs the command.
+    pub fn run(self) -> anyhow::Result<()> {
+        let ReferenceCommand {
+            scene: path,
+            probes,
+            samples,
+            seed,
+            out,
+        } = self;
+        anyhow::ensure!(
+            probes > 0 && samples > 1,
+            "--probes must be at least 1 and --samples at least 2"
+        );
+        let scene = solver::load_scene(&path)?;
+        // Before minutes of tracing, not after.
+        create_parent(&out)?;
+        let occluders = Occluders::new(&scene);
+        let printer = ProgressPrinter::new();
+        let placed = place_probes(&scene, probes, seed);
+        let traced = trace_probes(&scene, &occluders, &placed, samples, seed, &|p| {
+            printer.report(p)
+        });
+        let command = format!(
+            "radcast reference {} --probes {probes} --samples {samples} --seed {seed} --out {}",
+            path.display(),
+            out.display()
+        );
+        let reference = Reference {
+            command,
+            seed,
+            samples,
+            probes: traced,
+        };
+        std::fs::write(&out, serde_json::to_string_pretty(&reference)?)
+            .with_context(|| format!("{}: cannot write", out.display()))?;
+        eprintln!(
+            "wrote {} ({} probes x {samples} paths)",
+            out.display(),
+            probes
+        );
+        Ok(())
+    }
+}

@@ -1,0 +1,141 @@
+//! `radcast solve`: one solve, its summary (or JSON) and its error against a reference.
+
+use crate::{HEAP, ProgressPrinter};
+use anyhow::Context;
+use solver::accuracy::evaluate;
+use solver::args::{SolveArgs, budget_warnings};
+use solver::reference::Reference;
+use solver::{SolveReport, solve_file};
+use std::path::PathBuf;
+
+/// The arguments of `radcast solve`.
+#[derive(clap::Args)]
+pub struct SolveCommand {
+    /// The scene: OBJ (with its MTL) or glTF 2.0 (`.gltf`, `.glb`).
+    pub scene: PathBuf,
+    #[command(flatten)]
+    pub settings: SolveArgs,
+    /// Print one JSON object on stdout instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// Also measure the error against this reference file (adds `error` to the JSON).
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+}
+
+impl SolveCommand {
+    /// Runs the command.
+    pub fn run(self) -> anyhow::Result<()> {
+        let SolveCommand {
+            scene,
+            settings,
+            json,
+            reference,
+        } = self;
+        let request = settings.request().map_err(anyhow::Error::msg)?;
+        let printer = ProgressPrinter::new();
+        let reference = reference
+            .map(|path| -> anyhow::Result<Reference> {
+                let text = std::fs::read_to_string(&path)
+                    .with_context(|| format!("{}: cannot read", path.display()))?;
+                serde_json::from_str(&text)
+                    .with_context(|| format!("{}: not a radcast reference", path.display()))
+            })
+            .transpose()?;
+        let solved = solve_file(&scene, &request, &|p| printer.report(p))?;
+        let measured = reference.map(|r| {
+            evaluate(
+                &solved.scene,
+                &solved.mesh,
+                &solved.radiosity,
+                &solved.vertex_radiosity,
+                &r.probes,
+            )
+        });
+        let report = &solved.report;
+        if report.skipped_faces > 0 {
+            eprintln!(
+                "warning: {}: skipped {} zero-area faces",
+                scene.display(),
+                report.skipped_faces
+            );
+        }
+        if let (Some(asked), Some(stats)) = (&request.hierarchy, &report.hierarchy) {
+            budget_warnings(asked, stats)
+                .iter()
+                .for_each(|warning| eprintln!("warning: {warning}"));
+        }
+        if !report.converged {
+            eprintln!(
+                "warning: not converged after {} iterations (residual {:.3e} > tolerance {:.1e})",
+                report.iterations, report.residual, report.tolerance
+            );
+        }
+        if json {
+            let mut value = serde_json::to_value(report).context("serialising the report")?;
+            value["peak_memory_bytes"] = HEAP.peak_usage().into();
+            if let Some(measured) = measured {
+                value["error"] = serde_json::to_value(measured)?;
+            }
+            println!("{value}");
+        } else {
+            print_summary(&scene, report);
+            if let Some(e) = measured {
+                println!(
+                    "error       smooth RMS {:.4}, max {:.3}, energy {:+.4}; flat RMS {:.4}  ({} probes, reference noise {:.4})",
+                    e.smooth.rms,
+                    e.smooth.max,
+                    e.smooth.energy,
+                    e.flat.rms,
+                    e.probes,
+                    e.reference_noise
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+fn print_summary(scene: &std::path::Path, r: &SolveReport) {
+    let s = &r.seconds;
+    println!(
+        "scene       {} ({} objects, {} triangles)",
+        scene.display(),
+        r.objects.len(),
+        r.triangles
+    );
+    println!("patches     {}  ({} shadow rays)", r.patches, r.rays);
+    if let Some(h) = &r.hierarchy {
+        println!(
+            "hierarchy   {} links ({:.1} per leaf), {} clusters, {} rounds, {} links decided by the shaft alone",
+            h.links,
+            h.links as f64 / h.elements.max(1) as f64,
+            h.clusters,
+            h.rounds,
+            h.shaft_decided
+        );
+    }
+    println!("peak heap   {:.1} MB", HEAP.peak_usage() as f64 / 1e6);
+    println!(
+        "solver      {}: {} iterations, residual {:.2e}{}",
+        r.method,
+        r.iterations,
+        r.residual,
+        if r.converged { "" } else { " (NOT converged)" }
+    );
+    println!(
+        "seconds     load {:.3}  mesh {:.3}  form factors {:.3}  solve {:.3}  total {:.3}",
+        s.load, s.mesh, s.form_factors, s.solve, s.total
+    );
+    println!(
+        "{:<16} {:>14}  mean radiosity W/m^2 (r, g, b)",
+        "object", "area"
+    );
+    for o in &r.objects {
+        let [red, green, blue] = o.radiosity;
+        println!(
+            "{:<16} {:>14.6e}  {red:10.4} {green:10.4} {blue:10.4}",
+            o.name, o.area
+        );
+    }
+}
