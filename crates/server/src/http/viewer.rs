@@ -4,11 +4,14 @@
 use crate::Shared;
 use crate::http::admission::Pass;
 use crate::http::metrics::DropReason;
+use crate::publish::hub::Published;
 use axum::extract::ws::{CloseFrame, Message, WebSocket, close_code};
 use bytes::Bytes;
+use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
+use tokio::sync::watch;
 use tokio::time::{Instant, interval, timeout};
 use wire::{ClientMessage, ServerMessage};
 
@@ -36,127 +39,172 @@ enum End {
 
 /// Runs one admitted viewer to the end; `_place` holds its place under the viewer caps.
 pub async fn serve_viewer(socket: WebSocket, shared: Arc<Shared>, _place: Pass) {
-    let metrics = &shared.metrics;
-    let (mut sink, mut stream) = socket.split();
-    let limits = shared.process.limits;
-    let mut updates = shared.hub.subscribe();
-    let sent = |bytes: &Bytes| metrics.sent(bytes.len());
+    let (sink, stream) = socket.split();
+    let updates = shared.hub.subscribe();
+    let mut viewer = Viewer {
+        shared: &shared,
+        sink,
+        stream,
+        updates,
+        held: 0,
+        held_geometry: 0,
+        last_heard: Instant::now(),
+    };
+    let Err(end) = viewer.run().await;
+    viewer.say_farewell(end).await;
+}
 
-    let end = 'session: {
-        let first = updates.borrow_and_update().clone();
-        let geometry = shared.hub.geometry();
-        let mut held_geometry = geometry.version;
-        for bytes in [geometry.hello.clone(), first.full.clone()] {
-            sent(&bytes);
-            if !matches!(
-                timeout(limits.send_timeout, sink.send(Message::Binary(bytes))).await,
-                Ok(Ok(()))
-            ) {
-                break 'session End::Dropped(DropReason::Slow, "send timed out");
-            }
-        }
-        let mut held = first.version;
-        let mut last_heard = Instant::now();
+/// One viewer's connection and what it holds.
+struct Viewer<'a> {
+    shared: &'a Shared,
+    sink: SplitSink<WebSocket, Message>,
+    stream: SplitStream<WebSocket>,
+    updates: watch::Receiver<Arc<Published>>,
+    /// The solution version the viewer holds (a delta's base must be this).
+    held: u64,
+    /// The geometry version the viewer holds.
+    held_geometry: u64,
+    last_heard: Instant,
+}
+
+impl Viewer<'_> {
+    /// Hello and the current frame, then every newer version and a ping each interval, until
+    /// the session ends (never `Ok`).
+    async fn run(&mut self) -> Result<std::convert::Infallible, End> {
+        let limits = self.shared.process.limits;
+        let first = self.updates.borrow_and_update().clone();
+        let geometry = self.shared.hub.geometry();
+        self.held_geometry = geometry.version;
+        self.held = first.version;
+        self.send(Message::Binary(geometry.hello.clone())).await?;
+        self.send(Message::Binary(first.full.clone())).await?;
         let mut ping = interval(limits.ping_interval);
         ping.tick().await;
         loop {
             let outgoing = tokio::select! {
-                changed = updates.changed() => {
-                    if changed.is_err() {
-                        break 'session End::Shutdown;
-                    }
-                    let newest = updates.borrow_and_update().clone();
-                    if newest.geometry_version != held_geometry {
-                        // Tell the viewer to refetch the geometry before the colours that go with it.
-                        held_geometry = newest.geometry_version;
-                        let notice = Bytes::from(ServerMessage::GeometryChanged { geometry_version: held_geometry }.encode());
-                        sent(&notice);
-                        if !matches!(timeout(limits.send_timeout, sink.send(Message::Binary(notice))).await, Ok(Ok(()))) {
-                            break 'session End::Dropped(DropReason::Slow, "send timed out");
-                        }
-                    }
-                    let bytes = match &newest.delta {
-                        Some((base, delta)) if *base == held => delta.clone(),
-                        _ => {
-                            metrics.versions_skipped.fetch_add(newest.version.saturating_sub(held + 1), Ordering::Relaxed);
-                            metrics.full_resyncs.fetch_add(1, Ordering::Relaxed);
-                            newest.full.clone()
-                        }
-                    };
-                    held = newest.version;
-                    Message::Binary(bytes)
-                }
-                incoming = stream.next() => {
-                    last_heard = Instant::now();
-                    match incoming {
-                        Some(Ok(Message::Binary(bytes))) => match ClientMessage::decode(&bytes) {
-                            Ok(ClientMessage::RequestFull) => {
-                                let newest = updates.borrow_and_update().clone();
-                                held = newest.version;
-                                metrics.full_resyncs.fetch_add(1, Ordering::Relaxed);
-                                Message::Binary(newest.full.clone())
-                            }
-                            Err(_) => break 'session End::Dropped(DropReason::BadMessage, "not a radcast message"),
-                        },
-                        Some(Ok(Message::Text(_))) => break 'session End::Dropped(DropReason::BadMessage, "text messages are not part of the protocol"),
-                        Some(Ok(Message::Ping(_) | Message::Pong(_))) => continue,
-                        Some(Ok(Message::Close(_))) | None => break 'session End::Left,
-                        Some(Err(error)) => match classify(error) {
-                            Some(text) => break 'session End::Dropped(DropReason::BadMessage, text),
-                            None => break 'session End::Left,
-                        },
-                    }
-                }
+                changed = self.updates.changed() => match changed {
+                    Ok(()) => self.newest_frame().await?,
+                    Err(_) => return Err(End::Shutdown),
+                },
+                incoming = self.stream.next() => match self.answer(incoming)? {
+                    Some(message) => message,
+                    None => continue,
+                },
                 _ = ping.tick() => {
-                    if last_heard.elapsed() > limits.idle_timeout {
-                        break 'session End::Dropped(DropReason::Idle, "idle timeout");
+                    if self.last_heard.elapsed() > limits.idle_timeout {
+                        return Err(End::Dropped(DropReason::Idle, "idle timeout"));
                     }
                     Message::Ping(Bytes::new())
                 }
-                _ = shared.retired.cancelled() => break 'session End::Shutdown,
+                _ = self.shared.retired.cancelled() => return Err(End::Shutdown),
             };
-            if let Message::Binary(bytes) = &outgoing {
-                sent(bytes);
-            }
-            if !matches!(
-                timeout(limits.send_timeout, sink.send(outgoing)).await,
-                Ok(Ok(()))
-            ) {
-                break 'session End::Dropped(DropReason::Slow, "send timed out");
-            }
+            self.send(outgoing).await?;
         }
-    };
-    let close = |code, reason: &str| {
-        Message::Close(Some(CloseFrame {
-            code,
-            reason: reason.into(),
-        }))
-    };
-    let farewell = match end {
-        End::Left => None,
-        End::Dropped(reason, text) => {
-            metrics.dropped(reason);
-            let code = if reason == DropReason::BadMessage {
-                close_code::POLICY
-            } else {
-                close_code::AWAY
+    }
+
+    /// Sends `message` within the send timeout, or ends the session: a viewer that does not
+    /// take it has stopped reading.
+    async fn send(&mut self, message: Message) -> Result<(), End> {
+        if let Message::Binary(bytes) = &message {
+            self.shared.metrics.sent(bytes.len());
+        }
+        let send_timeout = self.shared.process.limits.send_timeout;
+        match timeout(send_timeout, self.sink.send(message)).await {
+            Ok(Ok(())) => Ok(()),
+            _ => Err(End::Dropped(DropReason::Slow, "send timed out")),
+        }
+    }
+
+    /// The frame that brings the viewer to the newest version: a delta from the version it
+    /// holds, or the full frame. A new geometry is announced first, so the viewer refetches it
+    /// before the colours that go with it.
+    async fn newest_frame(&mut self) -> Result<Message, End> {
+        let newest = self.updates.borrow_and_update().clone();
+        if newest.geometry_version != self.held_geometry {
+            self.held_geometry = newest.geometry_version;
+            let notice = ServerMessage::GeometryChanged {
+                geometry_version: self.held_geometry,
             };
-            Some(close(code, text))
+            self.send(Message::Binary(Bytes::from(notice.encode())))
+                .await?;
         }
-        End::Shutdown => Some(close(
-            close_code::AWAY,
-            match shared.process.shutdown.is_cancelled() {
-                true => "server shutting down",
-                false => "the scene's origin restarted: reconnect",
+        let metrics = &self.shared.metrics;
+        let bytes = match &newest.delta {
+            Some((base, delta)) if *base == self.held => delta.clone(),
+            _ => {
+                let skipped = newest.version.saturating_sub(self.held + 1);
+                metrics
+                    .versions_skipped
+                    .fetch_add(skipped, Ordering::Relaxed);
+                metrics.full_resyncs.fetch_add(1, Ordering::Relaxed);
+                newest.full.clone()
+            }
+        };
+        self.held = newest.version;
+        Ok(Message::Binary(bytes))
+    }
+
+    /// What to send for what the viewer sent (`None`: nothing), or why the session ends.
+    fn answer(
+        &mut self,
+        incoming: Option<Result<Message, axum::Error>>,
+    ) -> Result<Option<Message>, End> {
+        self.last_heard = Instant::now();
+        let bad = |text| Err(End::Dropped(DropReason::BadMessage, text));
+        match incoming {
+            Some(Ok(Message::Binary(bytes))) => match ClientMessage::decode(&bytes) {
+                Ok(ClientMessage::RequestFull) => {
+                    let newest = self.updates.borrow_and_update().clone();
+                    self.held = newest.version;
+                    let metrics = &self.shared.metrics;
+                    metrics.full_resyncs.fetch_add(1, Ordering::Relaxed);
+                    Ok(Some(Message::Binary(newest.full.clone())))
+                }
+                Err(_) => bad("not a radcast message"),
             },
-        )),
-    };
-    if let Some(message) = farewell {
-        // Best effort: a stalled viewer may not take even this, and shutdown does not wait.
-        let patience = match shared.process.shutdown.is_cancelled() {
+            Some(Ok(Message::Text(_))) => bad("text messages are not part of the protocol"),
+            Some(Ok(Message::Ping(_) | Message::Pong(_))) => Ok(None),
+            Some(Ok(Message::Close(_))) | None => Err(End::Left),
+            Some(Err(error)) => match classify(error) {
+                Some(text) => bad(text),
+                None => Err(End::Left),
+            },
+        }
+    }
+
+    /// The close frame that says why the session ended, sent best effort: a stalled viewer may
+    /// not take even this, and shutdown does not wait for it.
+    async fn say_farewell(mut self, end: End) {
+        let close = |code, reason: &str| {
+            Message::Close(Some(CloseFrame {
+                code,
+                reason: reason.into(),
+            }))
+        };
+        let shutting_down = self.shared.process.shutdown.is_cancelled();
+        let message = match end {
+            End::Left => return,
+            End::Dropped(reason, text) => {
+                self.shared.metrics.dropped(reason);
+                let code = match reason {
+                    DropReason::BadMessage => close_code::POLICY,
+                    _ => close_code::AWAY,
+                };
+                close(code, text)
+            }
+            End::Shutdown => close(
+                close_code::AWAY,
+                match shutting_down {
+                    true => "server shutting down",
+                    false => "the scene's origin restarted: reconnect",
+                },
+            ),
+        };
+        let limits = self.shared.process.limits;
+        let patience = match shutting_down {
             true => limits.send_timeout.min(crate::SHUTDOWN_GRACE),
             false => limits.send_timeout,
         };
-        let _ = timeout(patience, sink.send(message)).await;
+        let _ = timeout(patience, self.sink.send(message)).await;
     }
 }
