@@ -1,6 +1,6 @@
 //! Counters for `/metrics`, in the Prometheus text format.
 
-use crate::Shared;
+use crate::{Process, Shared};
 use crate::health::{Fault, Status};
 use crate::http::admission::{Gate, Refusal};
 use std::fmt::Write;
@@ -67,59 +67,91 @@ impl Metrics {
 
 /// The text served at `/metrics`.
 pub fn render(shared: &Shared) -> String {
-    let current = shared.hub.current();
-    let counters = &shared.metrics;
-    let mut out = String::new();
-    let mut metric = |name: &str, kind: &str, help: &str, samples: &[(String, f64)]| {
-        let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} {kind}");
+    let mut out = Exposition::default();
+    admission_metrics(&mut out, &shared.process);
+    stream_metrics(&mut out, shared);
+    solver_metrics(&mut out, shared);
+    if let Some(upstream) = &shared.upstream {
+        edge_metrics(&mut out, upstream);
+    }
+    out.0
+}
+
+/// Prometheus text exposition, metric by metric.
+#[derive(Default)]
+struct Exposition(String);
+
+impl Exposition {
+    /// One metric: its help and type lines, then a line per sample (labels, value).
+    fn metric(&mut self, name: &str, kind: &str, help: &str, samples: &[(String, f64)]) {
+        let _ = writeln!(self.0, "# HELP {name} {help}\n# TYPE {name} {kind}");
         for (labels, value) in samples {
-            let _ = writeln!(out, "{name}{labels} {value}");
+            let _ = writeln!(self.0, "{name}{labels} {value}");
         }
-    };
-    let plain = |v: u64| vec![(String::new(), v as f64)];
-    let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
-    let refusals = |gate: &Gate| {
-        vec![
-            (
-                "{limit=\"server\"}".to_string(),
-                gate.refused(Refusal::ServerFull) as f64,
-            ),
-            (
-                "{limit=\"per_ip\"}".to_string(),
-                gate.refused(Refusal::AddressFull) as f64,
-            ),
-        ]
-    };
-    metric(
+    }
+}
+
+/// One unlabelled sample.
+fn plain(value: u64) -> Vec<(String, f64)> {
+    vec![(String::new(), value as f64)]
+}
+
+fn get(counter: &AtomicU64) -> u64 {
+    counter.load(Ordering::Relaxed)
+}
+
+/// Refusals at a gate, by the cap that refused.
+fn refusals(gate: &Gate) -> Vec<(String, f64)> {
+    vec![
+        (
+            "{limit=\"server\"}".to_string(),
+            gate.refused(Refusal::ServerFull) as f64,
+        ),
+        (
+            "{limit=\"per_ip\"}".to_string(),
+            gate.refused(Refusal::AddressFull) as f64,
+        ),
+    ]
+}
+
+/// Viewers and connections against their caps.
+fn admission_metrics(out: &mut Exposition, process: &Process) {
+    out.metric(
         "radcast_viewers",
         "gauge",
         "Viewers connected now.",
-        &plain(shared.process.viewers.open() as u64),
+        &plain(process.viewers.open() as u64),
     );
-    metric(
+    out.metric(
         "radcast_viewers_refused_total",
         "counter",
         "Viewers refused at a viewer cap.",
-        &refusals(&shared.process.viewers),
+        &refusals(&process.viewers),
     );
-    metric(
+    out.metric(
         "radcast_connections",
         "gauge",
         "TCP connections open now, viewers included.",
-        &plain(shared.process.connections.open() as u64),
+        &plain(process.connections.open() as u64),
     );
-    metric(
+    out.metric(
         "radcast_connected_addresses",
         "gauge",
         "Distinct peer addresses with a connection open now.",
-        &plain(shared.process.connections.addresses() as u64),
+        &plain(process.connections.addresses() as u64),
     );
-    metric(
+    out.metric(
         "radcast_connections_refused_total",
         "counter",
         "TCP connections refused at a connection cap before any byte was read.",
-        &refusals(&shared.process.connections),
+        &refusals(&process.connections),
     );
+}
+
+/// What viewers were sent, and the version they follow.
+fn stream_metrics(out: &mut Exposition, shared: &Shared) {
+    let current = shared.hub.current();
+    let counters = &shared.metrics;
     let dropped: Vec<_> = DropReason::ALL
         .iter()
         .map(|r| {
@@ -129,54 +161,59 @@ pub fn render(shared: &Shared) -> String {
             )
         })
         .collect();
-    metric(
+    out.metric(
         "radcast_viewers_dropped_total",
         "counter",
         "Viewers disconnected by the server, by reason.",
         &dropped,
     );
-    metric(
+    out.metric(
         "radcast_frames_sent_total",
         "counter",
         "Frames sent to viewers.",
         &plain(get(&counters.frames_sent)),
     );
-    metric(
+    out.metric(
         "radcast_bytes_sent_total",
         "counter",
         "Frame bytes sent to viewers.",
         &plain(get(&counters.bytes_sent)),
     );
-    metric(
+    out.metric(
         "radcast_versions_skipped_total",
         "counter",
         "Solution versions a slow viewer skipped.",
         &plain(get(&counters.versions_skipped)),
     );
-    metric(
+    out.metric(
         "radcast_full_resyncs_total",
         "counter",
         "Full frames sent where a delta did not apply.",
         &plain(get(&counters.full_resyncs)),
     );
-    metric(
+    out.metric(
         "radcast_vertices",
         "gauge",
         "Colours per frame: the geometry's vertices.",
         &plain(current.colours.len() as u64),
     );
-    metric(
+    out.metric(
         "radcast_solution_version",
         "gauge",
         "Current solution version.",
         &plain(current.version),
     );
-    metric(
+    out.metric(
         "radcast_solution_final",
         "gauge",
         "1 once the solver converged.",
         &plain(current.is_final as u64),
     );
+}
+
+/// The solver thread: its stages, faults and edits.
+fn solver_metrics(out: &mut Exposition, shared: &Shared) {
+    let counters = &shared.metrics;
     let stages: Vec<_> = counters
         .solve_seconds
         .lock()
@@ -186,7 +223,7 @@ pub fn render(shared: &Shared) -> String {
                 .collect()
         })
         .unwrap_or_default();
-    metric(
+    out.metric(
         "radcast_solve_seconds",
         "gauge",
         "Seconds per solve stage.",
@@ -201,45 +238,46 @@ pub fn render(shared: &Shared) -> String {
             )
         })
         .collect();
-    metric(
+    out.metric(
         "radcast_faults_total",
         "counter",
         "Faults that began, by kind (see /healthz for those present now).",
         &faults,
     );
-    metric(
+    out.metric(
         "radcast_edit_batches_total",
         "counter",
         "Batches of edits the solver finished (applied, or refused and reported).",
         &plain(*shared.edits.finished().borrow()),
     );
     let up = !matches!(shared.health.status(), Status::Down(_));
-    metric(
+    out.metric(
         "radcast_solver_up",
         "gauge",
         "1 while the solver thread applies edits.",
         &plain(up as u64),
     );
-    if let Some(upstream) = &shared.upstream {
-        let silent = upstream.silent_for();
-        metric(
-            "radcast_edge_origin_up",
-            "gauge",
-            "On an edge: 1 while the origin is heard on NATS, 0 once it is silent.",
-            &plain((silent <= crate::fanout::SILENT_AFTER) as u64),
-        );
-        metric(
-            "radcast_edge_origin_silent_seconds",
-            "gauge",
-            "On an edge: seconds since the origin was last heard.",
-            &[(String::new(), silent.as_secs_f64())],
-        );
-        metric(
-            "radcast_edge_nats_connected",
-            "gauge",
-            "On an edge: 1 while connected to NATS.",
-            &plain(upstream.nats.is_connected() as u64),
-        );
-    }
-    out
+}
+
+/// On an edge: whether its origin and NATS are heard.
+fn edge_metrics(out: &mut Exposition, upstream: &crate::fanout::Upstream) {
+    let silent = upstream.silent_for();
+    out.metric(
+        "radcast_edge_origin_up",
+        "gauge",
+        "On an edge: 1 while the origin is heard on NATS, 0 once it is silent.",
+        &plain((silent <= crate::fanout::SILENT_AFTER) as u64),
+    );
+    out.metric(
+        "radcast_edge_origin_silent_seconds",
+        "gauge",
+        "On an edge: seconds since the origin was last heard.",
+        &[(String::new(), silent.as_secs_f64())],
+    );
+    out.metric(
+        "radcast_edge_nats_connected",
+        "gauge",
+        "On an edge: 1 while connected to NATS.",
+        &plain(upstream.nats.is_connected() as u64),
+    );
 }
