@@ -1,8 +1,8 @@
 //! Counters for `/metrics`, in the Prometheus text format.
 
-use crate::{Process, Shared};
 use crate::health::{Fault, Status};
 use crate::http::admission::{Gate, Refusal};
+use crate::{Process, Shared};
 use std::fmt::Write;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
