@@ -30,10 +30,51 @@ pub const MAX_REFLECTANCE: f64 = 0.99;
 
 /// Loads the glTF file at `path`.
 pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
-    let fail = |reason: String| SceneError::Parse {
+    let (gltf, buffers, images) = import(path)?;
+    let document = &gltf.document;
+    let Some(root) = document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+    else {
+        return Err(parse_error(path, "the file has no scene".into()));
+    };
+    let mut builder = Builder {
+        path,
+        buffers: &buffers,
+        images: &images,
+        scene: Scene::default(),
+        shown: HashMap::new(),
+        image_means: HashMap::new(),
+        names: HashMap::new(),
+    };
+    let mut stack: Vec<(gltf::Node, DMat4)> = root.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
+    while let Some((node, parent)) = stack.pop() {
+        let local = node
+            .transform()
+            .matrix()
+            .map(|column| column.map(f64::from));
+        let world = parent * DMat4::from_cols_array_2d(&local);
+        stack.extend(node.children().map(|child| (child, world)));
+        if let Some(mesh) = node.mesh() {
+            builder.add_mesh(&node, &mesh, world)?;
+        }
+    }
+    super::finish(builder.scene, path)
+}
+
+fn parse_error(path: &Path, reason: String) -> SceneError {
+    SceneError::Parse {
         path: path.into(),
         reason,
-    };
+    }
+}
+
+/// The document at `path` with its buffers and images, external files checked like every
+/// scene file before the crate reads them whole.
+fn import(
+    path: &Path,
+) -> Result<(gltf::Gltf, Vec<gltf::buffer::Data>, Vec<gltf::image::Data>), SceneError> {
+    let fail = |reason| parse_error(path, reason);
     check_scene_file(path)?;
     let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
         path: path.into(),
@@ -41,7 +82,6 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
     })?;
     let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| fail(e.to_string()))?;
     let folder = path.parent().unwrap_or(Path::new("."));
-    // The crate reads external files whole: check them first, as the OBJ loader does.
     let external = gltf
         .document
         .buffers()
@@ -60,128 +100,141 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
         .map_err(|e| fail(format!("buffers: {e}")))?;
     let images = gltf::import_images(&gltf.document, Some(folder), &buffers)
         .map_err(|e| fail(format!("images: {e}")))?;
-    let document = &gltf.document;
-    let Some(root) = document
-        .default_scene()
-        .or_else(|| document.scenes().next())
-    else {
-        return Err(fail("the file has no scene".into()));
-    };
-    let mut scene = Scene::default();
-    // Image index -> index into `scene.textures`, for the base-colour images faces show.
-    let mut shown: HashMap<usize, u32> = HashMap::new();
-    // Image index -> its linear mean, computed once however many materials use the image.
-    let mut image_means: HashMap<usize, Rgb> = HashMap::new();
-    let mut names: HashMap<String, usize> = HashMap::new();
-    let mut stack: Vec<(gltf::Node, DMat4)> = root.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
-    while let Some((node, parent)) = stack.pop() {
-        let local = node
-            .transform()
-            .matrix()
-            .map(|column| column.map(f64::from));
-        let world = parent * DMat4::from_cols_array_2d(&local);
-        stack.extend(node.children().map(|child| (child, world)));
-        let Some(mesh) = node.mesh() else {
-            continue;
-        };
+    Ok((gltf, buffers, images))
+}
+
+/// A scene as the document's nodes are added to it.
+struct Builder<'a> {
+    path: &'a Path,
+    buffers: &'a [gltf::buffer::Data],
+    images: &'a [gltf::image::Data],
+    scene: Scene,
+    /// Image index -> index into `scene.textures`, for the base-colour images faces show.
+    shown: HashMap<usize, u32>,
+    /// Image index -> its linear mean, computed once however many materials use the image.
+    image_means: HashMap<usize, Rgb>,
+    /// How many objects took each name so far.
+    names: HashMap<String, usize>,
+}
+
+impl Builder<'_> {
+    fn fail(&self, reason: String) -> SceneError {
+        parse_error(self.path, reason)
+    }
+
+    /// Adds `mesh`, placed by `world`, as an object named after `node` (made unique).
+    fn add_mesh(
+        &mut self,
+        node: &gltf::Node,
+        mesh: &gltf::Mesh,
+        world: DMat4,
+    ) -> Result<(), SceneError> {
         let base = node
             .name()
             .or(mesh.name())
             .map_or_else(|| format!("node{}", node.index()), str::to_string);
-        let seen = names.entry(base.clone()).or_insert(0);
+        let seen = self.names.entry(base.clone()).or_insert(0);
         *seen += 1;
         let name = match *seen {
             1 => base,
             n => format!("{base}#{n}"),
         };
-        let object = scene.add_object(name.clone());
+        let object = self.scene.add_object(name.clone());
         for (index, primitive) in mesh.primitives().enumerate() {
             let at = format!("object '{name}' primitive {index}");
-            if primitive.mode() != gltf::mesh::Mode::Triangles {
-                return Err(fail(format!(
-                    "{at}: mode {:?} is not supported (triangles only)",
-                    primitive.mode()
-                )));
-            }
-            let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let positions: Vec<DVec3> = reader
-                .read_positions()
-                .ok_or_else(|| fail(format!("{at}: no POSITION attribute")))?
-                .map(|p| world.transform_point3(DVec3::from(p.map(f64::from))))
-                .collect();
-            if let Some(bad) = positions
-                .iter()
-                .position(|p| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE)
-            {
-                return Err(fail(format!(
-                    "{at}: vertex {bad} lies at {}, not a finite point within ±{MAX_COORDINATE:e}",
-                    positions[bad]
-                )));
-            }
-            let indices: Vec<u32> = match reader.read_indices() {
-                Some(indices) => indices.into_u32().collect(),
-                None => (0..positions.len() as u32).collect(),
-            };
-            if let Some(&bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
-                return Err(fail(format!(
-                    "{at}: index {bad} past its {} vertices",
-                    positions.len()
-                )));
-            }
-            let base_texture = primitive
-                .material()
-                .pbr_metallic_roughness()
-                .base_color_texture();
-            let mapped = match base_texture {
-                Some(info) => {
-                    let set = info.tex_coord();
-                    let uvs = reader.read_tex_coords(set).map(|t| {
-                        t.into_f32()
-                            .map(|uv| uv.map(f64::from))
-                            .collect::<Vec<[f64; 2]>>()
-                    });
-                    match uvs {
-                        Some(uvs) => {
-                            check_texture_coordinates(&uvs, positions.len()).map_err(|reason| {
-                                fail(format!("{at}: TEXCOORD_{set}: {reason}"))
-                            })?;
-                            let image = info.texture().source().index();
-                            let texture = match shown.get(&image) {
-                                Some(&texture) => texture,
-                                None => {
-                                    let texture = texture_of(&images[image]).map_err(|reason| {
-                                        fail(format!("{at}: image {image}: {reason}"))
-                                    })?;
-                                    image_means.insert(image, texture.mean);
-                                    scene.textures.push(texture);
-                                    let index = scene.textures.len() as u32 - 1;
-                                    shown.insert(image, index);
-                                    index
-                                }
-                            };
-                            Some((texture, uvs))
-                        }
-                        None => None,
+            self.add_primitive(object, &primitive, world)
+                .map_err(|reason| self.fail(format!("{at}: {reason}")))?;
+        }
+        Ok(())
+    }
+
+    /// Adds the triangles of `primitive` to `object`; the reason names what is wrong.
+    fn add_primitive(
+        &mut self,
+        object: u32,
+        primitive: &gltf::Primitive,
+        world: DMat4,
+    ) -> Result<(), String> {
+        if primitive.mode() != gltf::mesh::Mode::Triangles {
+            return Err(format!(
+                "mode {:?} is not supported (triangles only)",
+                primitive.mode()
+            ));
+        }
+        let buffers = self.buffers;
+        let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+        let positions: Vec<DVec3> = reader
+            .read_positions()
+            .ok_or("no POSITION attribute")?
+            .map(|p| world.transform_point3(DVec3::from(p.map(f64::from))))
+            .collect();
+        if let Some(bad) = positions
+            .iter()
+            .position(|p| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE)
+        {
+            return Err(format!(
+                "vertex {bad} lies at {}, not a finite point within ±{MAX_COORDINATE:e}",
+                positions[bad]
+            ));
+        }
+        let indices: Vec<u32> = match reader.read_indices() {
+            Some(indices) => indices.into_u32().collect(),
+            None => (0..positions.len() as u32).collect(),
+        };
+        if let Some(&bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
+            return Err(format!("index {bad} past its {} vertices", positions.len()));
+        }
+        let base_texture = primitive
+            .material()
+            .pbr_metallic_roughness()
+            .base_color_texture();
+        let mapped = match base_texture {
+            Some(info) => {
+                let set = info.tex_coord();
+                let uvs = reader.read_tex_coords(set).map(|t| {
+                    t.into_f32()
+                        .map(|uv| uv.map(f64::from))
+                        .collect::<Vec<[f64; 2]>>()
+                });
+                match uvs {
+                    Some(uvs) => {
+                        check_texture_coordinates(&uvs, positions.len())
+                            .map_err(|reason| format!("TEXCOORD_{set}: {reason}"))?;
+                        Some((self.shown_texture(info.texture().source().index())?, uvs))
                     }
+                    None => None,
                 }
-                None => None,
-            };
-            let material = material_of(&primitive.material(), &images, &mut image_means)
-                .map_err(|reason| fail(format!("{at}: {reason}")))?;
-            for triangle in indices.chunks_exact(3) {
-                let corners: Vec<DVec3> = triangle.iter().map(|&i| positions[i as usize]).collect();
-                match &mapped {
-                    Some((texture, uvs)) => {
-                        let uvs: Vec<[f64; 2]> =
-                            triangle.iter().map(|&i| uvs[i as usize]).collect();
-                        scene.add_textured_polygon(object, &corners, &uvs, material, *texture)
-                    }
-                    None => scene.add_polygon(object, &corners, material),
+            }
+            None => None,
+        };
+        let material = material_of(&primitive.material(), self.images, &mut self.image_means)?;
+        for triangle in indices.chunks_exact(3) {
+            let corners: Vec<DVec3> = triangle.iter().map(|&i| positions[i as usize]).collect();
+            match &mapped {
+                Some((texture, uvs)) => {
+                    let uvs: Vec<[f64; 2]> = triangle.iter().map(|&i| uvs[i as usize]).collect();
+                    self.scene
+                        .add_textured_polygon(object, &corners, &uvs, material, *texture)
                 }
+                None => self.scene.add_polygon(object, &corners, material),
             }
         }
+        Ok(())
     }
-    super::finish(scene, path)
+
+    /// The index in `scene.textures` of image `image`, shown as a base colour (made once).
+    fn shown_texture(&mut self, image: usize) -> Result<u32, String> {
+        if let Some(&texture) = self.shown.get(&image) {
+            return Ok(texture);
+        }
+        let texture =
+            texture_of(&self.images[image]).map_err(|reason| format!("image {image}: {reason}"))?;
+        self.image_means.insert(image, texture.mean);
+        self.scene.textures.push(texture);
+        let index = self.scene.textures.len() as u32 - 1;
+        self.shown.insert(image, index);
+        Ok(index)
+    }
 }
 
 /// The radiosity material of a glTF material (see the module notes).

@@ -12,6 +12,39 @@ use std::path::{Path, PathBuf};
 pub fn load_obj(path: &Path) -> Result<Scene, SceneError> {
     let text = read_scene_file(path)?;
     let folder = path.parent().unwrap_or(Path::new("."));
+    let (models, materials) = parse(path, &text)?;
+    let mtl_path = first_mtllib(&text)
+        .map(|m| folder.join(m))
+        .unwrap_or_else(|| path.into());
+    let (checked, textures) = radiosity_materials(&mtl_path, &materials)?;
+    let mut scene = Scene {
+        view: find_view(path, &text)?,
+        textures,
+        ..Scene::default()
+    };
+    let mut object_ids: HashMap<String, u32> = HashMap::new();
+    for model in &models {
+        if model.mesh.indices.is_empty() {
+            continue;
+        }
+        let Some((material, texture)) = model.mesh.material_id.map(|id| checked[id]) else {
+            return Err(SceneError::NoMaterial {
+                path: path.into(),
+                object: model.name.clone(),
+            });
+        };
+        let object = *object_ids
+            .entry(model.name.clone())
+            .or_insert_with(|| scene.add_object(model.name.clone()));
+        add_faces(&mut scene, object, &model.mesh, material, texture);
+    }
+    super::finish(scene, path)
+}
+
+/// The models and materials of the OBJ `text` (from `path`), its lines and its MTL libraries
+/// checked first: our messages name the line, tobj's do not.
+fn parse(path: &Path, text: &str) -> Result<(Vec<tobj::Model>, Vec<tobj::Material>), SceneError> {
+    let folder = path.parent().unwrap_or(Path::new("."));
     let mtl_failure = std::cell::RefCell::new(None);
     let options = tobj::LoadOptions {
         triangulate: false,
@@ -32,7 +65,7 @@ pub fn load_obj(path: &Path) -> Result<Scene, SceneError> {
             .and_then(|text| tobj::load_mtl_buf(&mut text.as_bytes()))
     });
     // Check lines first: our messages name the line, tobj's do not.
-    let (models, materials) = match loaded {
+    match loaded {
         Ok((models, materials)) => {
             if let Some(error) = mtl_failure.take() {
                 return Err(error);
@@ -41,25 +74,30 @@ pub fn load_obj(path: &Path) -> Result<Scene, SceneError> {
                 path: path.into(),
                 reason: e.to_string(),
             })?;
-            lint_obj(path, &text, Some(&materials))?;
-            (models, materials)
+            lint_obj(path, text, Some(&materials))?;
+            Ok((models, materials))
         }
         Err(e) => {
             if let Some(error) = mtl_failure.take() {
                 return Err(error);
             }
-            lint_obj(path, &text, None)?;
-            return Err(SceneError::Parse {
+            lint_obj(path, text, None)?;
+            Err(SceneError::Parse {
                 path: path.into(),
                 reason: e.to_string(),
-            });
+            })
         }
-    };
-    let mtl_path = first_mtllib(&text)
-        .map(|m| folder.join(m))
-        .unwrap_or_else(|| path.into());
+    }
+}
+
+/// Each MTL material as radiosity takes it (with the index of its `map_Kd` texture), and the
+/// textures they name, each loaded once.
+fn radiosity_materials(
+    mtl_path: &Path,
+    materials: &[tobj::Material],
+) -> Result<(Vec<(Material, Option<u32>)>, Vec<Texture>), SceneError> {
     let mut textures: Vec<(PathBuf, Texture)> = Vec::new();
-    let checked: Vec<(Material, Option<u32>)> = materials
+    let checked = materials
         .iter()
         .map(|m| {
             let rgb = |c: Option<[f32; 3]>, absent: Rgb| {
@@ -97,63 +135,55 @@ pub fn load_obj(path: &Path) -> Result<Scene, SceneError> {
                 .validate()
                 .map(|()| (material, texture))
                 .map_err(|reason| SceneError::Material {
-                    path: mtl_path.clone(),
+                    path: mtl_path.into(),
                     material: m.name.clone(),
                     reason,
                 })
         })
         .collect::<Result<_, _>>()?;
+    Ok((
+        checked,
+        textures.into_iter().map(|(_, texture)| texture).collect(),
+    ))
+}
 
-    let mut scene = Scene {
-        view: find_view(path, &text)?,
-        textures: textures.into_iter().map(|(_, texture)| texture).collect(),
-        ..Scene::default()
+/// Adds the faces of `mesh` to `object`, textured where `texture` is given and the mesh has a
+/// coordinate per vertex.
+fn add_faces(
+    scene: &mut Scene,
+    object: u32,
+    mesh: &tobj::Mesh,
+    material: Material,
+    texture: Option<u32>,
+) {
+    let position = |i: u32| {
+        let p = &mesh.positions[3 * i as usize..3 * i as usize + 3];
+        DVec3::new(p[0].into(), p[1].into(), p[2].into())
     };
-    let mut object_ids: HashMap<String, u32> = HashMap::new();
-    for model in &models {
-        let mesh = &model.mesh;
-        if mesh.indices.is_empty() {
-            continue;
-        }
-        let Some((material, texture)) = mesh.material_id.map(|id| checked[id]) else {
-            return Err(SceneError::NoMaterial {
-                path: path.into(),
-                object: model.name.clone(),
-            });
-        };
-        let object = *object_ids
-            .entry(model.name.clone())
-            .or_insert_with(|| scene.add_object(model.name.clone()));
-        let position = |i: u32| {
-            let p = &mesh.positions[3 * i as usize..3 * i as usize + 3];
-            DVec3::new(p[0].into(), p[1].into(), p[2].into())
-        };
-        let mut start = 0;
-        let arities = if mesh.face_arities.is_empty() {
-            vec![3; mesh.indices.len() / 3]
-        } else {
-            mesh.face_arities.clone()
-        };
-        // OBJ's `vt` has v up from the image's bottom row; the scene keeps glTF's v down.
-        let uv = |i: u32| {
-            let t = &mesh.texcoords[2 * i as usize..2 * i as usize + 2];
-            [f64::from(t[0]), 1.0 - f64::from(t[1])]
-        };
-        let mapped = texture.filter(|_| mesh.texcoords.len() == mesh.positions.len() / 3 * 2);
-        for arity in arities {
-            let indices = &mesh.indices[start..start + arity as usize];
-            let corners: Vec<DVec3> = indices.iter().map(|&i| position(i)).collect();
-            start += arity as usize;
-            match mapped {
-                Some(texture) => {
-                    let uvs: Vec<[f64; 2]> = indices.iter().map(|&i| uv(i)).collect();
-                    scene.add_textured_polygon(object, &corners, &uvs, material, texture)
-                }
-                None => scene.add_polygon(object, &corners, material),
+    let mut start = 0;
+    let arities = if mesh.face_arities.is_empty() {
+        vec![3; mesh.indices.len() / 3]
+    } else {
+        mesh.face_arities.clone()
+    };
+    // OBJ's `vt` has v up from the image's bottom row; the scene keeps glTF's v down.
+    let uv = |i: u32| {
+        let t = &mesh.texcoords[2 * i as usize..2 * i as usize + 2];
+        [f64::from(t[0]), 1.0 - f64::from(t[1])]
+    };
+    let mapped = texture.filter(|_| mesh.texcoords.len() == mesh.positions.len() / 3 * 2);
+    for arity in arities {
+        let indices = &mesh.indices[start..start + arity as usize];
+        let corners: Vec<DVec3> = indices.iter().map(|&i| position(i)).collect();
+        start += arity as usize;
+        match mapped {
+            Some(texture) => {
+                let uvs: Vec<[f64; 2]> = indices.iter().map(|&i| uv(i)).collect();
+                scene.add_textured_polygon(object, &corners, &uvs, material, texture)
             }
+            None => scene.add_polygon(object, &corners, material),
         }
     }
-    super::finish(scene, path)
 }
 
 /// Colour statements of an MTL file: each needs three numbers.
@@ -257,103 +287,97 @@ fn lint_obj(
     text: &str,
     materials: Option<&[tobj::Material]>,
 ) -> Result<(), SceneError> {
-    let fail = |line: usize, reason: String| {
-        Err(SceneError::Line {
-            path: path.into(),
-            line: line + 1,
-            reason,
-        })
-    };
-    let (mut vertex_count, mut texture_coordinate_count): (i64, i64) = (0, 0);
+    let mut defined = Defined::default();
     for (number, line) in text.lines().enumerate() {
-        let mut words = line.split_whitespace();
-        match words.next() {
-            Some("v") => {
-                vertex_count += 1;
-                for word in words.take(3) {
-                    match word.parse::<f64>() {
-                        Ok(x) if x.is_finite() => {}
-                        _ => {
-                            return fail(
-                                number,
-                                format!(
-                                    "vertex {vertex_count} has coordinate '{word}', which is not a finite number"
-                                ),
-                            );
-                        }
-                    }
-                }
-            }
-            Some("vt") => {
-                texture_coordinate_count += 1;
-                for word in words.take(2) {
-                    match word.parse::<f64>() {
-                        Ok(x) if x.abs() <= MAX_TEXTURE_COORDINATE => {}
-                        _ => {
-                            return fail(
-                                number,
-                                format!(
-                                    "texture coordinate {texture_coordinate_count} has '{word}', which is not a finite number within ±{MAX_TEXTURE_COORDINATE:e}"
-                                ),
-                            );
-                        }
-                    }
-                }
-            }
-            Some("f") => {
-                for word in words {
-                    if let Some(Ok(index)) = word
-                        .split('/')
-                        .nth(1)
-                        .filter(|t| !t.is_empty())
-                        .map(str::parse::<i64>)
-                    {
-                        let resolved = match index < 0 {
-                            true => texture_coordinate_count + 1 + index,
-                            false => index,
-                        };
-                        if resolved < 1 || resolved > texture_coordinate_count {
-                            return fail(
-                                number,
-                                format!(
-                                    "face refers to texture coordinate {index}, but only {texture_coordinate_count} are defined before it"
-                                ),
-                            );
-                        }
-                    }
-                    let index_text = word.split('/').next().unwrap_or_default();
-                    let Ok(index) = index_text.parse::<i64>() else {
-                        return fail(number, format!("face vertex '{word}' is not an index"));
-                    };
-                    // OBJ indices are one-based; negative ones count back from the last vertex.
-                    let resolved = if index < 0 {
-                        vertex_count + 1 + index
-                    } else {
-                        index
-                    };
-                    if resolved < 1 || resolved > vertex_count {
-                        return fail(
-                            number,
-                            format!(
-                                "face refers to vertex {index}, but only {vertex_count} vertices are defined before it"
-                            ),
-                        );
-                    }
-                }
-            }
-            Some("usemtl") => {
-                let name = line.trim_start().trim_start_matches("usemtl").trim();
-                if let Some(materials) = materials
-                    && !materials.iter().any(|m| m.name == name)
-                {
-                    return fail(
-                        number,
-                        format!("material '{name}' is not defined in any mtllib"),
-                    );
-                }
-            }
-            _ => {}
+        lint_line(line, &mut defined, materials).map_err(|reason| SceneError::Line {
+            path: path.into(),
+            line: number + 1,
+            reason,
+        })?;
+    }
+    Ok(())
+}
+
+/// What the lines so far have defined, for the indices of the next.
+#[derive(Default)]
+struct Defined {
+    vertices: i64,
+    texture_coordinates: i64,
+}
+
+/// Why `line` is wrong, given what came before it (counted into `defined`).
+fn lint_line(
+    line: &str,
+    defined: &mut Defined,
+    materials: Option<&[tobj::Material]>,
+) -> Result<(), String> {
+    let mut words = line.split_whitespace();
+    match words.next() {
+        Some("v") => {
+            defined.vertices += 1;
+            let vertex = defined.vertices;
+            words
+                .take(3)
+                .try_for_each(|word| match word.parse::<f64>() {
+                    Ok(x) if x.is_finite() => Ok(()),
+                    _ => Err(format!(
+                        "vertex {vertex} has coordinate '{word}', which is not a finite number"
+                    )),
+                })
         }
+        Some("vt") => {
+            defined.texture_coordinates += 1;
+            let coordinate = defined.texture_coordinates;
+            words.take(2).try_for_each(|word| match word.parse::<f64>() {
+                Ok(x) if x.abs() <= MAX_TEXTURE_COORDINATE => Ok(()),
+                _ => Err(format!(
+                    "texture coordinate {coordinate} has '{word}', which is not a finite number within ±{MAX_TEXTURE_COORDINATE:e}"
+                )),
+            })
+        }
+        Some("f") => words.try_for_each(|word| lint_face_vertex(word, defined)),
+        Some("usemtl") => {
+            let name = line.trim_start().trim_start_matches("usemtl").trim();
+            match materials {
+                Some(materials) if !materials.iter().any(|m| m.name == name) => {
+                    Err(format!("material '{name}' is not defined in any mtllib"))
+                }
+                _ => Ok(()),
+            }
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Why a face's `v/vt/vn` word is wrong: not an index, or one past what is `defined`.
+fn lint_face_vertex(word: &str, defined: &Defined) -> Result<(), String> {
+    // OBJ indices are one-based; negative ones count back from the last one defined.
+    let resolve = |index: i64, count: i64| match index < 0 {
+        true => count + 1 + index,
+        false => index,
+    };
+    if let Some(Ok(index)) = word
+        .split('/')
+        .nth(1)
+        .filter(|t| !t.is_empty())
+        .map(str::parse::<i64>)
+    {
+        let count = defined.texture_coordinates;
+        if !(1..=count).contains(&resolve(index, count)) {
+            return Err(format!(
+                "face refers to texture coordinate {index}, but only {count} are defined before it"
+            ));
+        }
+    }
+    let index_text = word.split('/').next().unwrap_or_default();
+    let Ok(index) = index_text.parse::<i64>() else {
+        return Err(format!("face vertex '{word}' is not an index"));
+    };
+    let count = defined.vertices;
+    if !(1..=count).contains(&resolve(index, count)) {
+        return Err(format!(
+            "face refers to vertex {index}, but only {count} vertices are defined before it"
+        ));
     }
     Ok(())
 }
