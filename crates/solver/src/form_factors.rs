@@ -255,8 +255,8 @@ impl DenseFormFactors {
         moved: &[bool],
         region: (DVec3, DVec3),
     ) -> UpdateStats {
-        let (patches, n, settings) = (&mesh.patches, self.n, self.settings);
-        let boxes: Vec<(DVec3, DVec3)> = patches
+        let boxes: Vec<(DVec3, DVec3)> = mesh
+            .patches
             .iter()
             .map(|p| bounds(p.polygon.corners().iter().copied()))
             .collect();
@@ -272,10 +272,31 @@ impl DenseFormFactors {
             region.0 - DVec3::splat(margin),
             region.1 + DVec3::splat(margin),
         );
+        let (changed, pairs) = self.retrace_moved(mesh, occluders, moved, &boxes, region);
+        let entries = self.reintegrate(mesh, occluders, moved, &changed);
+        UpdateStats {
+            pairs,
+            rows: changed.iter().filter(|c| !c.is_empty()).count(),
+            entries,
+        }
+    }
+
+    /// Pass A of [`DenseFormFactors::update_moved`]: traces again the pairs that can have
+    /// changed (a moved patch, or a shadow segment through `region`) and keeps their clear-ray
+    /// counts; returns each row's changed columns and the pairs traced.
+    fn retrace_moved(
+        &mut self,
+        mesh: &Mesh,
+        occluders: &Occluders,
+        moved: &[bool],
+        boxes: &[(DVec3, DVec3)],
+        region: (DVec3, DVec3),
+    ) -> (Vec<Vec<u32>>, usize) {
+        let (patches, n, settings) = (&mesh.patches, self.n, self.settings);
         let overlaps =
             |(lo, hi): (DVec3, DVec3)| lo.cmple(region.1).all() && hi.cmpge(region.0).all();
         let pairs = AtomicUsize::new(0);
-        // Pass A: the pairs that can have changed, upper triangle; each row lists its changes.
+        // Upper triangle; each row lists its changes.
         let changed_upper: Vec<Vec<u32>> = self
             .clear
             .par_chunks_mut(n.max(1))
@@ -319,9 +340,21 @@ impl DenseFormFactors {
                 changed[j as usize].push(i as u32);
             }
         }
-        // Pass B: integrate only the changed entries of each row again; a moved receiver's
-        // whole row, since its own quadrature moved. A row whose normalisation stays the same
-        // (an open view) is only written where it changed.
+        (changed, pairs.into_inner())
+    }
+
+    /// Pass B of [`DenseFormFactors::update_moved`]: integrates again only the `changed`
+    /// entries of each row, a moved receiver's whole row, since its own quadrature moved. A
+    /// row whose normalisation stays the same (an open view) is only written where it
+    /// changed. Returns the entries integrated.
+    fn reintegrate(
+        &mut self,
+        mesh: &Mesh,
+        occluders: &Occluders,
+        moved: &[bool],
+        changed: &[Vec<u32>],
+    ) -> usize {
+        let (patches, n, settings) = (&mesh.patches, self.n, self.settings);
         let clear = &self.clear;
         let entries = AtomicUsize::new(0);
         self.values
@@ -370,11 +403,7 @@ impl DenseFormFactors {
                     *scale = normalise_row(patches, i, raw.into_iter(), occluders, row);
                 }
             });
-        UpdateStats {
-            pairs: pairs.into_inner(),
-            rows: changed.iter().filter(|c| !c.is_empty()).count(),
-            entries: entries.into_inner(),
-        }
+        entries.into_inner()
     }
 
     /// `F_ij`.

@@ -249,30 +249,7 @@ impl Hierarchy {
                     self.stats.leaf_budget_reached = true;
                 }
             }
-            let mut next = Vec::new();
-            for ((r, s), decision) in pending.into_iter().zip(decisions) {
-                match decision {
-                    Decision::Drop => {}
-                    Decision::Keep(link) => self.links.push(link),
-                    Decision::SplitReceiver => {
-                        self.split_for(r, &mut sources);
-                        next.extend(self.nodes[r as usize].children().map(|c| (c, s)));
-                    }
-                    Decision::SplitSource => {
-                        self.split_for(s, &mut sources);
-                        next.extend(self.nodes[s as usize].children().map(|c| (r, c)));
-                    }
-                    Decision::SplitBoth => {
-                        let children = self.nodes[r as usize].children();
-                        next.extend(
-                            children
-                                .clone()
-                                .flat_map(|a| children.clone().map(move |b| (a, b))),
-                        );
-                    }
-                }
-            }
-            pending = next;
+            pending = self.next_generation(pending, decisions, &mut sources);
             (run.progress)(Progress::Refining {
                 knob: run.knob,
                 round: run.round,
@@ -284,6 +261,40 @@ impl Hierarchy {
         self.stats.rays += rays_cast;
         self.stats.shaft_decided += shaft_decided;
         Refinement::Finished
+    }
+
+    /// Applies a generation's `decisions` on its `pending` pairs: links kept, elements split
+    /// (`sources` follows the new children); returns the pairs the next generation decides.
+    fn next_generation(
+        &mut self,
+        pending: Vec<(u32, u32)>,
+        decisions: Vec<Decision>,
+        sources: &mut NodeRadiosity,
+    ) -> Vec<(u32, u32)> {
+        let mut next = Vec::new();
+        for ((r, s), decision) in pending.into_iter().zip(decisions) {
+            match decision {
+                Decision::Drop => {}
+                Decision::Keep(link) => self.links.push(link),
+                Decision::SplitReceiver => {
+                    self.split_for(r, sources);
+                    next.extend(self.nodes[r as usize].children().map(|c| (c, s)));
+                }
+                Decision::SplitSource => {
+                    self.split_for(s, sources);
+                    next.extend(self.nodes[s as usize].children().map(|c| (r, c)));
+                }
+                Decision::SplitBoth => {
+                    let children = self.nodes[r as usize].children();
+                    next.extend(
+                        children
+                            .clone()
+                            .flat_map(|a| children.clone().map(move |b| (a, b))),
+                    );
+                }
+            }
+        }
+        next
     }
 
     /// Takes out of the kept links those that the new solution `sources` shows too coarse and

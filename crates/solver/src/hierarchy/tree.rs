@@ -89,6 +89,64 @@ fn midpoint(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
     [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2]
 }
 
+/// Face `face` of `scene` as one unsplit element, its size scale capped at `typical_radius`.
+fn face_element(scene: &Scene, face: u32, typical_radius: f64) -> Element {
+    let f = &scene.faces[face as usize];
+    let patch = Patch {
+        polygon: f.polygon,
+        corners: [0; 4],
+        face,
+        object: f.object,
+        area: 0.0,
+        centroid: DVec3::ZERO,
+        normal: f.polygon.normal(),
+        radius: 0.0,
+        reflectance: f.reflectance,
+        emission: f.emission,
+    };
+    let s = LATTICE_STEPS;
+    let lattice = if f.polygon.is_quad() {
+        [[0, 0], [s, 0], [s, s], [0, s]]
+    } else {
+        [[0, 0], [s, 0], [0, s], [0, s]]
+    };
+    Element {
+        patch,
+        lattice,
+        depth: 0,
+        size_scale: f.polygon.radius().min(typical_radius),
+    }
+}
+
+/// Each cluster's area, centroid, bounds, radius and reflectance from its children's,
+/// bottom-up (children follow their parent in `nodes`).
+fn summarise_clusters(nodes: &mut [Node]) {
+    for i in (0..nodes.len()).rev() {
+        if nodes[i].element.is_some() {
+            continue;
+        }
+        let children: Vec<Node> = nodes[i]
+            .children()
+            .map(|c| nodes[c as usize].clone())
+            .collect();
+        let area: f64 = children.iter().map(|c| c.area).sum();
+        let centroid = children.iter().map(|c| c.centroid * c.area).sum::<DVec3>() / area;
+        let node = &mut nodes[i];
+        node.area = area;
+        node.centroid = centroid;
+        node.bounds = children
+            .iter()
+            .map(|c| c.bounds)
+            .reduce(union)
+            .expect("a cluster has children");
+        node.radius = children
+            .iter()
+            .map(|c| c.centroid.distance(centroid) + c.radius)
+            .fold(0.0, f64::max);
+        node.reflectance = children.iter().map(|c| c.reflectance).fold(0.0, f64::max);
+    }
+}
+
 pub(super) fn union(a: Bounds, b: Bounds) -> Bounds {
     (a.0.min(b.0), a.1.max(b.1))
 }
@@ -124,35 +182,8 @@ impl Hierarchy {
             let faces = range.start as u32..range.end as u32;
             if range.len() == 1 {
                 let face = order[range.start];
-                let f = &scene.faces[face as usize];
-                let patch = Patch {
-                    polygon: f.polygon,
-                    corners: [0; 4],
-                    face,
-                    object: f.object,
-                    area: 0.0,
-                    centroid: DVec3::ZERO,
-                    normal: f.polygon.normal(),
-                    radius: 0.0,
-                    reflectance: f.reflectance,
-                    emission: f.emission,
-                };
-                let s = LATTICE_STEPS;
-                let lattice = if f.polygon.is_quad() {
-                    [[0, 0], [s, 0], [s, s], [0, s]]
-                } else {
-                    [[0, 0], [s, 0], [0, s], [0, s]]
-                };
-                nodes[index as usize] = element_node(
-                    Element {
-                        patch,
-                        lattice,
-                        depth: 0,
-                        size_scale: f.polygon.radius().min(typical_radius),
-                    },
-                    parent,
-                    faces,
-                );
+                let element = face_element(scene, face, typical_radius);
+                nodes[index as usize] = element_node(element, parent, faces);
                 face_node[face as usize] = index;
                 continue;
             }
@@ -182,37 +213,12 @@ impl Hierarchy {
             stack.push((first, range.start..range.start + half, index));
             stack.push((first + 1, range.start + half..range.end, index));
         }
-        // Clusters from their children, bottom-up.
-        for i in (0..nodes.len()).rev() {
-            if nodes[i].element.is_some() {
-                continue;
-            }
-            let children: Vec<Node> = nodes[i]
-                .children()
-                .map(|c| nodes[c as usize].clone())
-                .collect();
-            let area: f64 = children.iter().map(|c| c.area).sum();
-            let centroid = children.iter().map(|c| c.centroid * c.area).sum::<DVec3>() / area;
-            let node = &mut nodes[i];
-            node.area = area;
-            node.centroid = centroid;
-            node.bounds = children
-                .iter()
-                .map(|c| c.bounds)
-                .reduce(union)
-                .expect("a cluster has children");
-            node.radius = children
-                .iter()
-                .map(|c| c.centroid.distance(centroid) + c.radius)
-                .fold(0.0, f64::max);
-            node.reflectance = children.iter().map(|c| c.reflectance).fold(0.0, f64::max);
-        }
+        summarise_clusters(&mut nodes);
         let mut area_prefix = vec![0.0];
-        for &f in &order {
-            area_prefix.push(
-                area_prefix.last().copied().unwrap_or(0.0) + scene.faces[f as usize].polygon.area(),
-            );
-        }
+        area_prefix.extend(order.iter().scan(0.0, |sum, &f| {
+            *sum += scene.faces[f as usize].polygon.area();
+            Some(*sum)
+        }));
         let clusters = nodes.iter().filter(|n| n.element.is_none()).count();
         Hierarchy {
             nodes,
