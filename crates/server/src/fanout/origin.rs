@@ -9,6 +9,7 @@ use super::{
 use crate::Shared;
 use crate::control::{Field, Reply};
 use crate::health::Fault;
+use crate::publish::hub::Published;
 use async_nats::jetstream::object_store;
 use axum::http::StatusCode;
 use bytes::Bytes;
@@ -129,32 +130,17 @@ async fn publish_newest(
             .publish_with_headers(record_subject(scene), record_headers, json.clone().into())
             .await?;
     }
-    if held.map(|(v, _)| v) != Some(current.version) {
-        let payload = match &current.delta {
-            Some((base, delta)) if held.map(|(v, _)| v) == Some(*base) => delta.clone(),
-            _ => current.full.clone(),
-        };
-        let mut frame_headers = async_nats::HeaderMap::new();
-        frame_headers.insert(headers::VERSION, current.version.to_string());
-        frame_headers.insert(headers::GEOMETRY, geometry.version.to_string());
-        frame_headers.insert(headers::RUN, run);
-        let subject = frame_subject(scene);
-        let full_name = full_object(scene);
-        let full = |objects| put(objects, &full_name, tag(current.version), &current.full);
-        if payload.len() <= nats.client.server_info().max_payload {
-            // The frame first, for latency; the snapshot right after, for edges that missed it
-            // (one that asks in between retries a second later).
-            nats.client
-                .publish_with_headers(subject, frame_headers, payload)
-                .await?;
-            full(objects).await?;
-        } else {
-            // Too big for one message: an empty announcement after the snapshot is stored.
-            full(objects).await?;
-            nats.client
-                .publish_with_headers(subject, frame_headers, Bytes::new())
-                .await?;
-        }
+    let held_version = held.map(|(v, _)| v);
+    if held_version != Some(current.version) {
+        publish_frame(
+            nats,
+            objects,
+            scene,
+            &current,
+            held_version,
+            tag(current.version),
+        )
+        .await?;
     }
     if let Some(json) = &record_json {
         put(objects, &record_object(scene), tag(current.version), json).await?;
@@ -164,6 +150,44 @@ async fn publish_newest(
         geometry_version: geometry.version,
         record,
     });
+    Ok(())
+}
+
+/// Publishes `current`'s frame (its delta when NATS holds its base, `held_version`) and stores
+/// its full frame as the snapshot, tagged `full_tag`.
+async fn publish_frame(
+    nats: &Nats,
+    objects: &object_store::ObjectStore,
+    scene: &str,
+    current: &Published,
+    held_version: Option<u64>,
+    full_tag: Tag,
+) -> anyhow::Result<()> {
+    let payload = match &current.delta {
+        Some((base, delta)) if held_version == Some(*base) => delta.clone(),
+        _ => current.full.clone(),
+    };
+    let mut frame_headers = async_nats::HeaderMap::new();
+    frame_headers.insert(headers::VERSION, current.version.to_string());
+    frame_headers.insert(headers::GEOMETRY, full_tag.geometry_version.to_string());
+    frame_headers.insert(headers::RUN, full_tag.run.as_str());
+    let subject = frame_subject(scene);
+    let full_name = full_object(scene);
+    let full = |objects| put(objects, &full_name, full_tag, &current.full);
+    if payload.len() <= nats.client.server_info().max_payload {
+        // The frame first, for latency; the snapshot right after, for edges that missed it
+        // (one that asks in between retries a second later).
+        nats.client
+            .publish_with_headers(subject, frame_headers, payload)
+            .await?;
+        full(objects).await?;
+    } else {
+        // Too big for one message: an empty announcement after the snapshot is stored.
+        full(objects).await?;
+        nats.client
+            .publish_with_headers(subject, frame_headers, Bytes::new())
+            .await?;
+    }
     Ok(())
 }
 
