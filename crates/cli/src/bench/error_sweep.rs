@@ -6,8 +6,8 @@ use plotters::prelude::*;
 use solver::accuracy::{SolutionError, evaluate};
 use solver::reference::Reference;
 use solver::{
-    FormFactorSettings, HierarchySettings, Method, PatchTarget, SolveRequest, SolverSettings,
-    solve_scene,
+    FormFactorSettings, HierarchySettings, Method, PatchTarget, Scene, SolveRequest,
+    SolverSettings, solve_scene,
 };
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
@@ -84,91 +84,9 @@ pub fn run(
         let start = Instant::now();
         let scene = solver::load_scene(scene_path)?;
         let load = start.elapsed().as_secs_f64();
-        let Sweep {
-            counts,
-            rays,
-            errors,
-            repeat,
-        } = *sweep;
-        let middle = counts[counts.len() / 2];
-        let dense = |count: usize, method: Method, rays_per_pair: u32| SolveRequest {
-            patches: PatchTarget::Count(count),
-            form_factors: FormFactorSettings { rays_per_pair },
-            solver: SolverSettings {
-                method,
-                ..SolverSettings::default()
-            },
-            ..SolveRequest::default()
-        };
-        // Mesh size and ray count decide the error; the method only the solve time.
-        let mut configurations: Vec<SolveRequest> = counts
-            .iter()
-            .flat_map(|&n| rays.iter().map(move |&r| dense(n, Method::Gmres, r)))
-            .collect();
-        configurations.extend(
-            [Method::Jacobi, Method::GaussSeidel, Method::Progressive]
-                .map(|m| dense(middle, m, FormFactorSettings::default().rays_per_pair)),
-        );
-        configurations.extend(errors.iter().map(|&error| SolveRequest {
-            hierarchy: Some(HierarchySettings {
-                error,
-                ..HierarchySettings::default()
-            }),
-            ..SolveRequest::default()
-        }));
-        for request in configurations {
-            let mut runs = Vec::new();
-            let mut peak_bytes = 0;
-            for _ in 0..repeat {
-                crate::HEAP.reset_peak_usage();
-                runs.push(solve_scene(scene.clone(), &request, &solver::no_progress)?);
-                peak_bytes = peak_bytes.max(crate::HEAP.peak_usage());
-            }
-            let stage = |f: fn(&solver::SolveReport) -> f64| {
-                super::median(runs.iter().map(|r| f(&r.report)).collect())
-            };
-            let (mesh, ff, solve) = (
-                stage(|r| r.seconds.mesh),
-                stage(|r| r.seconds.form_factors),
-                stage(|r| r.seconds.solve),
-            );
-            let last = runs.last().context("one run")?;
-            let error = evaluate(
-                &last.scene,
-                &last.mesh,
-                &last.radiosity,
-                &last.vertex_radiosity,
-                &reference.probes,
-            );
-            let (method, links) = match (&request.hierarchy, &last.report.hierarchy) {
-                (Some(settings), Some(stats)) => (
-                    format!("hierarchical E={}", settings.error),
-                    stats.links as u64,
-                ),
-                _ => (
-                    request.solver.method.to_string(),
-                    (last.report.patches as u64).pow(2),
-                ),
-            };
-            eprintln!(
-                "{}: {} patches, {method}, {} rays: {:.3} s, smooth RMS {:.4}",
-                scene_path.display(),
-                last.report.patches,
-                request.form_factors.rays_per_pair,
-                load + mesh + ff + solve,
-                error.smooth.rms
-            );
-            rows.push(Row {
-                scene: scene_path.display().to_string(),
-                patches: last.report.patches,
-                method,
-                rays: request.form_factors.rays_per_pair,
-                links,
-                peak_bytes,
-                seconds: [load + mesh, ff, solve, load + mesh + ff + solve],
-                error,
-                pareto: false,
-            });
+        for request in configurations(sweep) {
+            let row = measure(scene_path, &scene, load, &request, sweep.repeat, &reference)?;
+            rows.push(row);
         }
     }
     // Pareto front per scene: nothing else is both faster and more accurate to the eye.
@@ -190,6 +108,108 @@ pub fn run(
         .with_context(|| format!("{}: cannot write", table_path.display()))?;
     plot(&rows, &peers, &out_dir.join(format!("{name}.svg")))?;
     Ok(())
+}
+
+/// What the sweep solves on each scene: dense GMRES at each count and ray setting, the other
+/// solvers at the middle count, and the hierarchical path at each knob.
+fn configurations(sweep: &Sweep) -> Vec<SolveRequest> {
+    let Sweep {
+        counts,
+        rays,
+        errors,
+        ..
+    } = *sweep;
+    let middle = counts[counts.len() / 2];
+    let dense = |count: usize, method: Method, rays_per_pair: u32| SolveRequest {
+        patches: PatchTarget::Count(count),
+        form_factors: FormFactorSettings { rays_per_pair },
+        solver: SolverSettings {
+            method,
+            ..SolverSettings::default()
+        },
+        ..SolveRequest::default()
+    };
+    // Mesh size and ray count decide the error; the method only the solve time.
+    let mut configurations: Vec<SolveRequest> = counts
+        .iter()
+        .flat_map(|&n| rays.iter().map(move |&r| dense(n, Method::Gmres, r)))
+        .collect();
+    configurations.extend(
+        [Method::Jacobi, Method::GaussSeidel, Method::Progressive]
+            .map(|m| dense(middle, m, FormFactorSettings::default().rays_per_pair)),
+    );
+    configurations.extend(errors.iter().map(|&error| SolveRequest {
+        hierarchy: Some(HierarchySettings {
+            error,
+            ..HierarchySettings::default()
+        }),
+        ..SolveRequest::default()
+    }));
+    configurations
+}
+
+/// `request` solved `repeat` times on `scene` (loaded from `scene_path` in `load` seconds):
+/// the median stage times, the peak heap and the error against `reference`.
+fn measure(
+    scene_path: &Path,
+    scene: &Scene,
+    load: f64,
+    request: &SolveRequest,
+    repeat: usize,
+    reference: &Reference,
+) -> anyhow::Result<Row> {
+    let mut runs = Vec::new();
+    let mut peak_bytes = 0;
+    for _ in 0..repeat {
+        crate::HEAP.reset_peak_usage();
+        runs.push(solve_scene(scene.clone(), request, &solver::no_progress)?);
+        peak_bytes = peak_bytes.max(crate::HEAP.peak_usage());
+    }
+    let stage = |f: fn(&solver::SolveReport) -> f64| {
+        super::median(runs.iter().map(|r| f(&r.report)).collect())
+    };
+    let (mesh, ff, solve) = (
+        stage(|r| r.seconds.mesh),
+        stage(|r| r.seconds.form_factors),
+        stage(|r| r.seconds.solve),
+    );
+    let last = runs.last().context("one run")?;
+    let error = evaluate(
+        &last.scene,
+        &last.mesh,
+        &last.radiosity,
+        &last.vertex_radiosity,
+        &reference.probes,
+    );
+    let (method, links) = match (&request.hierarchy, &last.report.hierarchy) {
+        (Some(settings), Some(stats)) => (
+            format!("hierarchical E={}", settings.error),
+            stats.links as u64,
+        ),
+        _ => (
+            request.solver.method.to_string(),
+            (last.report.patches as u64).pow(2),
+        ),
+    };
+    eprintln!(
+        "{}: {} patches, {method}, {} rays: {:.3} s, smooth RMS {:.4}",
+        scene_path.display(),
+        last.report.patches,
+        request.form_factors.rays_per_pair,
+        load + mesh + ff + solve,
+        error.smooth.rms
+    );
+    Ok(Row {
+        scene: scene_path.display().to_string(),
+        patches: last.report.patches,
+        method,
+        rays: request.form_factors.rays_per_pair,
+        links,
+        peak_bytes,
+        seconds: [load + mesh, ff, solve, load + mesh + ff + solve],
+        error,
+        pareto: false,
+    })
 }
 
 /// Another system's rows on one scene, measured elsewhere (a file under docs/peers/).
@@ -282,6 +302,54 @@ impl Peers {
     }
 }
 
+/// The section that reads, for each hierarchical row, the dense seconds at its smooth RMS.
+fn hierarchy_against_dense(out: &mut String, rows: &[Row]) -> anyhow::Result<()> {
+    writeln!(out, "\n## Hierarchical against dense at equal error\n")?;
+    writeln!(
+        out,
+        "Dense GMRES seconds at the hierarchical row's smooth RMS, interpolated log-log between the two dense rows (2 rays per pair) that bracket it; beyond the dense rows, extrapolated from the last two (marked ~).\n"
+    )?;
+    writeln!(
+        out,
+        "| scene | hierarchical | leaves | seconds | smooth RMS | dense seconds at that RMS | dense patches at that RMS | speed-up |"
+    )?;
+    writeln!(out, "|---|---|---:|---:|---:|---:|---:|---:|")?;
+    for h in rows.iter().filter(|r| r.method.starts_with("hierarchical")) {
+        let mut dense: Vec<&Row> = rows
+            .iter()
+            .filter(|r| {
+                r.scene == h.scene
+                    && r.method == "gmres"
+                    && r.rays == FormFactorSettings::default().rays_per_pair
+            })
+            .collect();
+        dense.sort_by_key(|r| r.patches);
+        let smooth = |r: &Row| r.error.smooth.rms;
+        let (Some((seconds, extrapolated)), Some((patches, _))) = (
+            seconds_at(&dense, h.error.smooth.rms, smooth),
+            interpolate_at(&dense, h.error.smooth.rms, smooth, |r| r.patches as f64),
+        ) else {
+            continue;
+        };
+        writeln!(
+            out,
+            "| {} | {} | {} | {:.3} | {:.4} | {}{:.2} | {}{:.0} | {}{:.1}× |",
+            h.scene,
+            h.method,
+            h.patches,
+            h.seconds[3],
+            h.error.smooth.rms,
+            if extrapolated { "~" } else { "" },
+            seconds,
+            if extrapolated { "~" } else { "" },
+            patches,
+            if extrapolated { "~" } else { "" },
+            seconds / h.seconds[3]
+        )?;
+    }
+    Ok(())
+}
+
 fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf], name: &str) -> anyhow::Result<String> {
     let mut out = String::new();
     writeln!(out, "# Speed against error\n")?;
@@ -356,49 +424,7 @@ fn markdown(rows: &[Row], command: &str, scenes: &[PathBuf], name: &str) -> anyh
             if r.pareto { "★" } else { "" }
         )?;
     }
-    writeln!(out, "\n## Hierarchical against dense at equal error\n")?;
-    writeln!(
-        out,
-        "Dense GMRES seconds at the hierarchical row's smooth RMS, interpolated log-log between the two dense rows (2 rays per pair) that bracket it; beyond the dense rows, extrapolated from the last two (marked ~).\n"
-    )?;
-    writeln!(
-        out,
-        "| scene | hierarchical | leaves | seconds | smooth RMS | dense seconds at that RMS | dense patches at that RMS | speed-up |"
-    )?;
-    writeln!(out, "|---|---|---:|---:|---:|---:|---:|---:|")?;
-    for h in rows.iter().filter(|r| r.method.starts_with("hierarchical")) {
-        let mut dense: Vec<&Row> = rows
-            .iter()
-            .filter(|r| {
-                r.scene == h.scene
-                    && r.method == "gmres"
-                    && r.rays == FormFactorSettings::default().rays_per_pair
-            })
-            .collect();
-        dense.sort_by_key(|r| r.patches);
-        let smooth = |r: &Row| r.error.smooth.rms;
-        let (Some((seconds, extrapolated)), Some((patches, _))) = (
-            seconds_at(&dense, h.error.smooth.rms, smooth),
-            interpolate_at(&dense, h.error.smooth.rms, smooth, |r| r.patches as f64),
-        ) else {
-            continue;
-        };
-        writeln!(
-            out,
-            "| {} | {} | {} | {:.3} | {:.4} | {}{:.2} | {}{:.0} | {}{:.1}× |",
-            h.scene,
-            h.method,
-            h.patches,
-            h.seconds[3],
-            h.error.smooth.rms,
-            if extrapolated { "~" } else { "" },
-            seconds,
-            if extrapolated { "~" } else { "" },
-            patches,
-            if extrapolated { "~" } else { "" },
-            seconds / h.seconds[3]
-        )?;
-    }
+    hierarchy_against_dense(&mut out, rows)?;
     Ok(out)
 }
 
@@ -467,15 +493,11 @@ fn interpolate_at(
     ))
 }
 
-fn plot(rows: &[Row], peers: &[Peers], path: &Path) -> anyhow::Result<()> {
-    let bounds = |f: fn(&Row) -> f64| {
-        rows.iter()
-            .map(f)
-            .fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
-                (lo.min(v), hi.max(v))
-            })
-    };
-    let peer_points: Vec<(&str, Vec<(f64, f64)>)> = peers
+/// A peer system's name and its (seconds, smooth RMS) points, per peer file.
+type PeerPoints<'a> = Vec<(&'a str, Vec<(f64, f64)>)>;
+
+fn peer_points(peers: &[Peers]) -> PeerPoints<'_> {
+    peers
         .iter()
         .map(|p| {
             let system = p.rows.first().map_or("peer", |r| r.system.as_str());
@@ -484,7 +506,18 @@ fn plot(rows: &[Row], peers: &[Peers], path: &Path) -> anyhow::Result<()> {
                 p.rows.iter().map(|r| (r.seconds, r.smooth_rms)).collect(),
             )
         })
-        .collect();
+        .collect()
+}
+
+/// The (seconds, smooth RMS) ranges the plot must show: every row and every peer point.
+fn plot_ranges(rows: &[Row], peer_points: &PeerPoints) -> ((f64, f64), (f64, f64)) {
+    let bounds = |f: fn(&Row) -> f64| {
+        rows.iter()
+            .map(f)
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            })
+    };
     let widen = |(lo, hi): (f64, f64), values: &mut dyn Iterator<Item = f64>| {
         values.fold((lo, hi), |(lo, hi), v| (lo.min(v), hi.max(v)))
     };
@@ -498,6 +531,55 @@ fn plot(rows: &[Row], peers: &[Peers], path: &Path) -> anyhow::Result<()> {
         bounds(|r| r.error.smooth.rms.max(1e-6)),
         &mut all_peers().map(|p| p.1),
     );
+    ((t_lo, t_hi), (e_lo, e_hi))
+}
+
+type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>;
+
+/// Each scene's Pareto front as a line, and each peer's rows as crosses on a line.
+fn draw_fronts_and_peers(
+    chart: &mut Chart,
+    rows: &[Row],
+    scenes: &[&str],
+    peer_points: &PeerPoints,
+) -> anyhow::Result<()> {
+    let point = |r: &Row| (r.seconds[3], r.error.smooth.rms.max(1e-6));
+    for (s, scene) in scenes.iter().enumerate() {
+        let mut front: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.pareto && r.scene == *scene)
+            .map(point)
+            .collect();
+        front.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let marker = if s == 0 {
+            "circles"
+        } else if s == 1 {
+            "triangles"
+        } else {
+            "squares"
+        };
+        chart
+            .draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?
+            .label(format!("Pareto front, {scene} ({marker})"))
+            .legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], BLACK));
+    }
+    for (system, points) in peer_points {
+        chart
+            .draw_series(LineSeries::new(points.clone(), BLACK.stroke_width(2)))?
+            .label(format!("{system} (peer, 1 thread; crosses)"))
+            .legend(|(x, y)| Cross::new((x, y), 5, BLACK.stroke_width(2)));
+        chart.draw_series(
+            points
+                .iter()
+                .map(|p| Cross::new(*p, 6, BLACK.stroke_width(2))),
+        )?;
+    }
+    Ok(())
+}
+
+fn plot(rows: &[Row], peers: &[Peers], path: &Path) -> anyhow::Result<()> {
+    let peer_points = peer_points(peers);
+    let ((t_lo, t_hi), (e_lo, e_hi)) = plot_ranges(rows, &peer_points);
     let root = SVGBackend::new(path, (960, 640)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
@@ -562,36 +644,7 @@ fn plot(rows: &[Row], peers: &[Peers], path: &Path) -> anyhow::Result<()> {
             .label(label)
             .legend(move |(x, y)| Circle::new((x, y), 5, colour.filled()));
     }
-    for (s, scene) in scenes.iter().enumerate() {
-        let mut front: Vec<(f64, f64)> = rows
-            .iter()
-            .filter(|r| r.pareto && r.scene == *scene)
-            .map(point)
-            .collect();
-        front.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let marker = if s == 0 {
-            "circles"
-        } else if s == 1 {
-            "triangles"
-        } else {
-            "squares"
-        };
-        chart
-            .draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?
-            .label(format!("Pareto front, {scene} ({marker})"))
-            .legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], BLACK));
-    }
-    for (system, points) in &peer_points {
-        chart
-            .draw_series(LineSeries::new(points.clone(), BLACK.stroke_width(2)))?
-            .label(format!("{system} (peer, 1 thread; crosses)"))
-            .legend(|(x, y)| Cross::new((x, y), 5, BLACK.stroke_width(2)));
-        chart.draw_series(
-            points
-                .iter()
-                .map(|p| Cross::new(*p, 6, BLACK.stroke_width(2))),
-        )?;
-    }
+    draw_fronts_and_peers(&mut chart, rows, &scenes, &peer_points)?;
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::LowerLeft)

@@ -90,12 +90,15 @@ fn parse(path: &Path, text: &str) -> Result<(Vec<tobj::Model>, Vec<tobj::Materia
     }
 }
 
+/// A material and the index of its `map_Kd` texture, if it has one.
+type TexturedMaterial = (Material, Option<u32>);
+
 /// Each MTL material as radiosity takes it (with the index of its `map_Kd` texture), and the
 /// textures they name, each loaded once.
 fn radiosity_materials(
     mtl_path: &Path,
     materials: &[tobj::Material],
-) -> Result<(Vec<(Material, Option<u32>)>, Vec<Texture>), SceneError> {
+) -> Result<(Vec<TexturedMaterial>, Vec<Texture>), SceneError> {
     let mut textures: Vec<(PathBuf, Texture)> = Vec::new();
     let checked = materials
         .iter()
