@@ -276,7 +276,7 @@ fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation
         .unwrap();
     session.solve(&solver::no_progress);
     let offset = glam::dvec3(40.0, 0.0, -30.0);
-    let moved = session.translate("short_block", offset).unwrap();
+    let moved = session.move_object("short_block", offset).unwrap();
     let MoveWork::Dense(work) = moved.work else {
         panic!("a dense session updates its matrix: {moved:?}")
     };
@@ -364,12 +364,12 @@ fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation
     assert!(work.entries < n * n / 2, "{moved:?}");
     // Unknown objects and non-finite offsets are refused.
     assert_eq!(
-        session.translate("sofa", offset),
+        session.move_object("sofa", offset),
         Err(solver::EditError::UnknownObject("sofa".into()))
     );
     assert!(
         session
-            .translate("short_block", glam::dvec3(f64::NAN, 0.0, 0.0))
+            .move_object("short_block", glam::dvec3(f64::NAN, 0.0, 0.0))
             .is_err()
     );
 }

@@ -725,7 +725,7 @@ async fn a_hierarchical_restart_serves_its_cached_leaves_and_edits_them_without_
     assert!(
         matches!(
             solution,
-            server::publish::solver_thread::Solution::Cached(_)
+            server::publish::solver_thread::EditBase::Cached(_)
         ),
         "no refinement"
     );

@@ -7,7 +7,6 @@ pub mod accuracy;
 #[cfg(feature = "clap")]
 pub mod args;
 pub mod form_factors;
-pub mod gather;
 pub mod generate;
 pub mod geometry;
 pub mod hierarchy;

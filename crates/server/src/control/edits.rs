@@ -54,7 +54,7 @@ impl Edits {
     }
 
     /// Adds a translation of `object` to any not yet applied.
-    pub fn translate(&self, object: &str, offset: [f64; 3]) {
+    pub fn move_object(&self, object: &str, offset: [f64; 3]) {
         let mut pending = self.pending.lock().expect("edits lock");
         let total = pending
             .batch
@@ -114,8 +114,8 @@ mod tests {
             edits.set_emission("light", [level as f64; 3]);
         }
         edits.set_emission("wall", [1.0, 0.0, 0.0]);
-        edits.translate("box", [1.0, 2.0, 0.0]);
-        edits.translate("box", [0.5, 0.0, -1.0]);
+        edits.move_object("box", [1.0, 2.0, 0.0]);
+        edits.move_object("box", [0.5, 0.0, -1.0]);
         let batch = edits.wait().expect("edits");
         assert_eq!(batch.emissions.len(), 2);
         assert_eq!(batch.emissions["light"], [99.0; 3]);

@@ -15,7 +15,7 @@ pub enum Field {
     /// `PUT /api/objects/{name}/emission` with `{"emission": [r, g, b]}` (W/m^2).
     Emission,
     /// `PUT /api/objects/{name}/transform` with `{"translate": [x, y, z]}` (scene units).
-    Translate,
+    Move,
 }
 
 impl Field {
@@ -23,13 +23,13 @@ impl Field {
     pub fn key(self) -> &'static str {
         match self {
             Field::Emission => "emission",
-            Field::Translate => "translate",
+            Field::Move => "translate",
         }
     }
 
     /// The field whose JSON key is `key`.
     pub fn from_key(key: &str) -> Option<Field> {
-        [Field::Emission, Field::Translate]
+        [Field::Emission, Field::Move]
             .into_iter()
             .find(|f| f.key() == key)
     }
@@ -38,7 +38,7 @@ impl Field {
     fn check(self) -> fn([f64; 3]) -> Result<(), String> {
         match self {
             Field::Emission => solver::scene::check_emission,
-            Field::Translate => solver::scene::check_translation,
+            Field::Move => solver::scene::check_translation,
         }
     }
 }
@@ -140,7 +140,7 @@ pub fn apply(
         Ok(value) => {
             match field {
                 Field::Emission => shared.edits.set_emission(name, value),
-                Field::Translate => shared.edits.translate(name, value),
+                Field::Move => shared.edits.move_object(name, value),
             }
             let mut body = serde_json::json!({ "object": name, "status": "queued" });
             body[field.key()] = serde_json::json!(value);

@@ -244,7 +244,7 @@ async fn set_transform(
     headers: HeaderMap,
     body: axum::body::Bytes,
 ) -> Response {
-    edit(&shared, &name, &headers, &body, Field::Translate).await
+    edit(&shared, &name, &headers, &body, Field::Move).await
 }
 
 /// Serves one scene's routes on `listener` until its process shuts down.

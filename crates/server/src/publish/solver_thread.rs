@@ -53,8 +53,8 @@ pub fn start(
         .name("solver".into())
         .spawn(move || {
             let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                let solution = solve_and_publish(&prepared, &shared, cache_dir.as_deref())?;
-                serve_edits(&prepared, &shared, solution)
+                let base = solve_and_publish(&prepared, &shared, cache_dir.as_deref())?;
+                serve_edits(&prepared, &shared, base)
             }));
             let reason = match run {
                 Ok(Ok(())) => return,
@@ -77,7 +77,7 @@ pub fn start(
 
 /// What the first solve leaves for later edits: the live session, or (after a cache hit) the
 /// cached radiosity to warm-start one from when the first edit arrives.
-pub enum Solution {
+pub enum EditBase {
     /// Form factors in memory.
     Live(Box<Session>),
     /// Read from the cache; form factors not computed yet.
@@ -90,7 +90,7 @@ pub fn solve_and_publish(
     prepared: &Prepared,
     shared: &Shared,
     cache_dir: Option<&Path>,
-) -> anyhow::Result<Solution> {
+) -> anyhow::Result<EditBase> {
     let hub = &shared.hub;
     if let Some(dir) = cache_dir {
         let path = cache::entry_path(dir, &prepared.digest);
@@ -108,7 +108,7 @@ pub fn solve_and_publish(
                     hub.replace_geometry(geometry);
                 }
                 hub.publish(&cached.vertex_radiosity, true);
-                return Ok(Solution::Cached(cached.radiosity));
+                return Ok(EditBase::Cached(cached.radiosity));
             }
             Err(Rejected::Missing) => {
                 tracing::info!(path = %path.display(), "no cached solution: solving")
@@ -183,15 +183,15 @@ pub fn solve_and_publish(
             ),
         }
     }
-    Ok(Solution::Live(Box::new(session)))
+    Ok(EditBase::Live(Box::new(session)))
 }
 
 /// Applies edits as they come until shutdown: each batch re-solves from the current answer
 /// (form factors unchanged) and publishes one new version. Blocking.
-pub fn serve_edits(prepared: &Prepared, shared: &Shared, solution: Solution) -> anyhow::Result<()> {
-    let mut session = match solution {
-        Solution::Live(session) => *session,
-        Solution::Cached(radiosity) => {
+pub fn serve_edits(prepared: &Prepared, shared: &Shared, base: EditBase) -> anyhow::Result<()> {
+    let mut session = match base {
+        EditBase::Live(session) => *session,
+        EditBase::Cached(radiosity) => {
             // Form factors are computed on the first edit only: a cached scene nobody edits
             // never pays for them.
             let Some(batch) = shared.edits.wait() else {
@@ -240,7 +240,7 @@ fn apply(
     let mut refused = Vec::new();
     let mut moved = false;
     for (object, offset) in &batch.moves {
-        match session.translate(object, DVec3::from(*offset)) {
+        match session.move_object(object, DVec3::from(*offset)) {
             Ok(report) => {
                 moved = true;
                 let ms = report.seconds * 1e3;

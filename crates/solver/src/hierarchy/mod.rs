@@ -46,11 +46,11 @@ use crate::pair::FormFactorSettings;
 use crate::scene::{Rgb, Scene};
 use crate::solve::{NeedsEntries, SolveOutcome, SolverSettings, System, solve};
 use crate::visibility::Occluders;
-use crate::{Limit, Progress};
+use crate::Progress;
 use glam::DVec3;
 use operator::{Incoming, Slope};
 use rayon::prelude::*;
-use refine::{Budget, Overflow, RefineRun, RefineTarget, Refinement};
+use refine::{Attempt, Budget, Fineness, Overflow, Pass};
 use tree::Node;
 
 /// The one accuracy knob of the hierarchical path, and the budget that bounds its memory.
@@ -232,7 +232,7 @@ impl Hierarchy {
         rays: FormFactorSettings,
         solver: &SolverSettings,
         progress: &(dyn Fn(Progress) + Sync),
-    ) -> Result<Refined, NeedsEntries> {
+    ) -> Result<BuiltHierarchy, NeedsEntries> {
         let mut tree = Hierarchy::cluster_tree(scene);
         tree.face_closed = tree
             .face_node
@@ -269,8 +269,8 @@ impl Hierarchy {
                 },
             };
             let limit = match run.refine(tree.clone(), knob, budget)? {
-                Ok(refined) => return Ok(refined),
-                Err(limit) => limit,
+                Attempt::Done(built) => return Ok(built),
+                Attempt::Abandoned(limit) => limit,
             };
             progress(Progress::Coarsening {
                 knob,
@@ -283,7 +283,7 @@ impl Hierarchy {
 }
 
 /// A refined hierarchy and the last solution of its refinement rounds, one value per leaf.
-pub struct Refined {
+pub struct BuiltHierarchy {
     /// The elements, clusters and links.
     pub hierarchy: Hierarchy,
     /// Radiosity per leaf, W/m^2: a start for the final solve.
@@ -310,7 +310,7 @@ impl Rounds<'_> {
         mut hierarchy: Hierarchy,
         knob: f64,
         budget: Budget,
-    ) -> Result<Result<Refined, Limit>, NeedsEntries> {
+    ) -> Result<Attempt<BuiltHierarchy>, NeedsEntries> {
         let smallest = MIN_RADIUS_PER_ERROR * knob;
         let mut radiosity: Vec<Rgb> = (0..hierarchy.leaves.len())
             .map(|i| {
@@ -335,7 +335,7 @@ impl Rounds<'_> {
                 radiosity = solved.radiosity;
             }
             let sources = hierarchy.node_radiosity(&radiosity);
-            let target = RefineTarget {
+            let target = Fineness {
                 tolerance: knob * hierarchy.mean_reflected(&radiosity),
                 smallest,
             };
@@ -352,7 +352,7 @@ impl Rounds<'_> {
                 self.occluders,
                 self.rays,
                 std::mem::take(&mut pending),
-                RefineRun {
+                Pass {
                     budget,
                     knob,
                     round,
@@ -360,14 +360,14 @@ impl Rounds<'_> {
                 },
             );
             hierarchy.stats.rounds = round + 1;
-            if let Refinement::Abandoned(limit) = refinement {
-                return Ok(Err(limit));
+            if let Attempt::Abandoned(limit) = refinement {
+                return Ok(Attempt::Abandoned(limit));
             }
             hierarchy.index(self.occluders);
             radiosity = hierarchy.inherit(inherited, before);
         }
         hierarchy.stats.knob_used = knob;
-        Ok(Ok(Refined {
+        Ok(Attempt::Done(BuiltHierarchy {
             hierarchy,
             radiosity,
         }))

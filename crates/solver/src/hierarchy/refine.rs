@@ -46,7 +46,7 @@ impl NodeRadiosity {
 }
 
 /// How fine refinement goes.
-pub(super) struct RefineTarget {
+pub(super) struct Fineness {
     /// Largest radiosity error a link may carry, W/m^2.
     pub(super) tolerance: f64,
     /// Smallest element radius, as a fraction of its size scale.
@@ -64,7 +64,7 @@ pub(super) struct Budget {
 /// One refinement pass: its leaf budget, and where its progress goes after each generation of
 /// link decisions ([`Progress::Refining`], tagged with the knob and round).
 #[derive(Clone, Copy)]
-pub(super) struct RefineRun<'a> {
+pub(super) struct Pass<'a> {
     pub(super) budget: Budget,
     pub(super) knob: f64,
     pub(super) round: usize,
@@ -80,24 +80,24 @@ pub(super) enum Overflow {
     Freeze,
 }
 
-/// How a refinement ended.
+/// How an attempt at refining ended: done, with what it made, or abandoned at a budget.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Refinement {
+pub(super) enum Attempt<T> {
     /// Every pending link was kept, dropped or split to the end.
-    Finished,
+    Done(T),
     /// A budget stopped it part-way ([`Overflow::Abandon`]).
     Abandoned(Limit),
 }
 
 /// Read-only state for deciding links in parallel.
-struct Refiner<'a> {
+struct Decider<'a> {
     factors: LinkFactors<'a>,
     sources: &'a NodeRadiosity,
     /// How fine to refine (no element splits once the leaf budget froze them).
-    target: RefineTarget,
+    target: Fineness,
 }
 
-impl Refiner<'_> {
+impl Decider<'_> {
     /// Keep, drop or split the link from `source` to `receiver`.
     fn decide(&self, receiver: u32, source: u32) -> Decision {
         let (r, s) = (self.factors.node(receiver), self.factors.node(source));
@@ -166,19 +166,19 @@ impl Hierarchy {
     pub(super) fn refine(
         &mut self,
         mut sources: NodeRadiosity,
-        target: &RefineTarget,
+        target: &Fineness,
         occluders: &Occluders,
         rays: FormFactorSettings,
         mut pending: Vec<(u32, u32)>,
-        run: RefineRun,
-    ) -> Refinement {
+        run: Pass,
+    ) -> Attempt<()> {
         let budget = run.budget;
         let (mut leaves, mut rays_cast, mut shaft_decided) = (self.leaves.len(), 0, 0);
         while !pending.is_empty() {
             // Links now plus pairs still to decide: what the links would be with no more splits.
             if self.links.len() + pending.len() > budget.max_links {
                 if budget.overflow == Overflow::Abandon {
-                    return Refinement::Abandoned(Limit::Links(budget.max_links));
+                    return Attempt::Abandoned(Limit::Links(budget.max_links));
                 }
                 self.stats.link_budget_reached = true;
             }
@@ -188,10 +188,10 @@ impl Hierarchy {
                 false => target.tolerance,
             };
             let mut decide = |pairs: &[(u32, u32)], frozen: bool| {
-                let refiner = Refiner {
+                let refiner = Decider {
                     factors: LinkFactors::new(self, occluders, rays),
                     sources: &sources,
-                    target: RefineTarget {
+                    target: Fineness {
                         tolerance,
                         smallest: smallest_while(frozen, target.smallest),
                     },
@@ -228,7 +228,7 @@ impl Hierarchy {
                     .sum::<usize>();
                 decisions.extend(decided);
                 if watch_links && made > budget.max_links {
-                    return Refinement::Abandoned(Limit::Links(budget.max_links));
+                    return Attempt::Abandoned(Limit::Links(budget.max_links));
                 }
             }
             if !frozen {
@@ -237,7 +237,7 @@ impl Hierarchy {
                     leaves += new_leaves;
                 } else if budget.overflow == Overflow::Abandon {
                     self.stats.leaf_budget_reached = true;
-                    return Refinement::Abandoned(Limit::Leaves(budget.max_leaves));
+                    return Attempt::Abandoned(Limit::Leaves(budget.max_leaves));
                 } else {
                     // Over budget: the pairs that asked for element splits decide again without
                     // them.
@@ -260,7 +260,7 @@ impl Hierarchy {
         }
         self.stats.rays += rays_cast;
         self.stats.shaft_decided += shaft_decided;
-        Refinement::Finished
+        Attempt::Done(())
     }
 
     /// Applies a generation's `decisions` on its `pending` pairs: links kept, elements split
@@ -302,7 +302,7 @@ impl Hierarchy {
     pub(super) fn take_links_to_redo(
         &mut self,
         sources: &NodeRadiosity,
-        target: &RefineTarget,
+        target: &Fineness,
     ) -> Vec<(u32, u32)> {
         let node = |n: u32| &self.nodes[n as usize];
         let smallest = smallest_while(self.stats.leaf_budget_reached, target.smallest);

@@ -3,9 +3,9 @@
 
 use super::report::{ObjectRadiosity, SolveReport, StageSeconds};
 use super::request::{SolveError, SolveRequest, check_dense_size};
+use super::vertices::CornerLight;
 use crate::form_factors::{DenseFormFactors, UpdateStats};
-use crate::gather::CornerLight;
-use crate::hierarchy::{Hierarchy, HierarchyStats, Refined};
+use crate::hierarchy::{BuiltHierarchy, Hierarchy, HierarchyStats};
 use crate::mesh::Mesh;
 use crate::scene::{MAX_COORDINATE, Rgb, Scene, check_emission, check_translation};
 use crate::solve::{NeedsEntries, SolveOutcome, System, solve};
@@ -17,16 +17,16 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 /// How a session moves light between patches.
-enum Transfer {
+enum Factors {
     Dense(DenseFormFactors),
     Hierarchy(Box<Hierarchy>),
 }
 
-impl Transfer {
+impl Factors {
     fn transport(&self) -> &dyn Transport {
         match self {
-            Transfer::Dense(factors) => factors,
-            Transfer::Hierarchy(hierarchy) => hierarchy.as_ref(),
+            Factors::Dense(factors) => factors,
+            Factors::Hierarchy(hierarchy) => hierarchy.as_ref(),
         }
     }
 }
@@ -39,7 +39,7 @@ impl Transfer {
 pub struct Session {
     scene: Scene,
     mesh: Mesh,
-    transfer: Transfer,
+    factors: Factors,
     /// Direct light at the mesh corners, for the values viewers are sent.
     corner_light: CornerLight,
     /// The solution for the scene's own emission.
@@ -137,7 +137,7 @@ impl Session {
         Ok(Session::assemble(
             scene.clone(),
             mesh.clone(),
-            Transfer::Dense(form_factors),
+            Factors::Dense(form_factors),
             &occluders,
             request,
             seconds,
@@ -166,7 +166,7 @@ impl Session {
         let occluders = Occluders::new(scene);
         seconds.mesh = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let Refined {
+        let BuiltHierarchy {
             hierarchy,
             radiosity,
         } = Hierarchy::build(
@@ -182,7 +182,7 @@ impl Session {
         Ok(Session::assemble(
             scene.clone(),
             mesh,
-            Transfer::Hierarchy(Box::new(hierarchy)),
+            Factors::Hierarchy(Box::new(hierarchy)),
             &occluders,
             request,
             seconds,
@@ -193,7 +193,7 @@ impl Session {
     fn assemble(
         scene: Scene,
         mesh: Mesh,
-        transfer: Transfer,
+        factors: Factors,
         occluders: &Occluders,
         request: &SolveRequest,
         seconds: StageSeconds,
@@ -222,7 +222,7 @@ impl Session {
             corner_light,
             scene,
             mesh,
-            transfer,
+            factors,
         }
     }
 
@@ -248,9 +248,9 @@ impl Session {
 
     /// The hierarchy's statistics, for a hierarchical session.
     fn hierarchy_stats(&self) -> Option<HierarchyStats> {
-        match &self.transfer {
-            Transfer::Dense(_) => None,
-            Transfer::Hierarchy(hierarchy) => Some(hierarchy.stats()),
+        match &self.factors {
+            Factors::Dense(_) => None,
+            Factors::Hierarchy(hierarchy) => Some(hierarchy.stats()),
         }
     }
 
@@ -264,7 +264,7 @@ impl Session {
 
     /// Moves object `name` by `offset`, recomputing only the form factors it can affect. The
     /// next [`Session::solve`] solves the moved scene in full (with the current emission).
-    pub fn translate(&mut self, name: &str, offset: DVec3) -> Result<MoveReport, EditError> {
+    pub fn move_object(&mut self, name: &str, offset: DVec3) -> Result<MoveReport, EditError> {
         let object = self.object_index(name)?;
         check_translation(offset.to_array()).map_err(EditError::InvalidTranslation)?;
         let reach = self
@@ -309,8 +309,8 @@ impl Session {
         let mut swept = corners(&self.scene);
         self.scene.translate_object(object, offset);
         swept.extend(corners(&self.scene));
-        match &mut self.transfer {
-            Transfer::Dense(form_factors) => {
+        match &mut self.factors {
+            Factors::Dense(form_factors) => {
                 let occluders = Occluders::new(&self.scene);
                 self.mesh.translate_object(object, offset);
                 let moved: Vec<bool> = self.patch_objects.iter().map(|o| *o == object).collect();
@@ -326,7 +326,7 @@ impl Session {
                     seconds: clock.elapsed().as_secs_f64(),
                 })
             }
-            Transfer::Hierarchy(_) => {
+            Factors::Hierarchy(_) => {
                 // Refinement depends on where light falls, so the hierarchy is built again: new
                 // leaves, which viewers get as a new geometry.
                 let seconds = self.seconds;
@@ -353,7 +353,7 @@ impl Session {
     pub fn vertex_radiosity(&self) -> Vec<Rgb> {
         self.corner_light.corner_radiosity(
             &self.mesh,
-            self.transfer.transport(),
+            self.factors.transport(),
             &self.radiosity,
             &self.current_emission(),
         )
@@ -398,7 +398,7 @@ impl Session {
         };
         // Both constructors refuse a method the transport cannot run.
         solve(
-            self.transfer.transport(),
+            self.factors.transport(),
             &system,
             &self.request.solver,
             initial,
@@ -524,9 +524,9 @@ impl Session {
             residual,
             converged,
             tolerance: self.request.solver.tolerance,
-            rays: match &self.transfer {
-                Transfer::Dense(factors) => factors.rays_cast,
-                Transfer::Hierarchy(hierarchy) => hierarchy.stats().rays,
+            rays: match &self.factors {
+                Factors::Dense(factors) => factors.rays_cast,
+                Factors::Hierarchy(hierarchy) => hierarchy.stats().rays,
             },
             seconds: self.seconds,
             objects: self
@@ -661,7 +661,7 @@ mod tests {
         }
         for bad in [DVec3::new(0.0, f64::NAN, 0.0), DVec3::new(1e39, 0.0, 0.0)] {
             assert!(matches!(
-                live.translate("floor", bad),
+                live.move_object("floor", bad),
                 Err(EditError::InvalidTranslation(_))
             ));
         }
@@ -674,9 +674,9 @@ mod tests {
     fn a_move_may_not_carry_an_object_past_what_f32_geometry_holds() {
         let mut live = session(&two_lamp_box());
         let far = DVec3::new(1e30, 0.0, 0.0);
-        assert!(live.translate("floor", far).is_ok(), "up to the bound");
+        assert!(live.move_object("floor", far).is_ok(), "up to the bound");
         assert_eq!(
-            live.translate("floor", far),
+            live.move_object("floor", far),
             Err(EditError::InvalidTranslation(
                 "[1e30, 0.0, 0.0] would take 'floor' 2e30 from the origin, past 1e30".into()
             ))

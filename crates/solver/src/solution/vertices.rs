@@ -129,9 +129,9 @@ impl CornerLight {
                     })
                 })
                 .collect();
-            let corners = DirectFactors::gather(&corners_of(mesh), &emitters, occluders, 0);
+            let corners = DirectFactors::at_points(&corners_of(mesh), &emitters, occluders, 0);
             let centres =
-                DirectFactors::gather(&centroids, &emitters, occluders, mesh.positions.len());
+                DirectFactors::at_points(&centroids, &emitters, occluders, mesh.positions.len());
             (corners, centres)
         } else {
             (
@@ -278,7 +278,7 @@ impl DirectFactors {
 
     /// Gathers `emitters` at `points` (`None`: a point nothing uses); `seed_base` tells this
     /// set of points' ray samples from another's.
-    fn gather(
+    fn at_points(
         points: &[Option<GatherPoint>],
         emitters: &[Emitter],
         occluders: &Occluders,
