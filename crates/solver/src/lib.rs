@@ -1,38 +1,51 @@
 //! The radiosity solver of radcast: scene in, radiosity per patch out. No networking.
 //!
-//! The flow is [`scene`] (OBJ + MTL) -> [`mesh`] (patches) -> [`form_factors`] (with
-//! [`visibility`]) -> [`solve`]; [`pipeline`] runs it end to end with timings.
+//! The flow, top to bottom: `input` (OBJ + MTL, glTF) reads files into a `scene` (the model);
+//! `mesh` cuts it into patches; form factors with `visibility` (`form_factors`, dense, or
+//! `hierarchy`) make a [`Transport`]; `solve` iterates on it; `solution` holds the vocabulary
+//! ([`SolveRequest`], [`SolveReport`]), the live [`Session`], the vertex values viewers are sent
+//! and the offline [`solve_file`]. The flow's types are re-exported here, one path each; the
+//! modules below are the tools beside it.
 
 pub mod accuracy;
 #[cfg(feature = "clap")]
 pub mod args;
-pub mod form_factors;
 pub mod generate;
-pub mod geometry;
-pub mod hierarchy;
-pub mod input;
-pub mod mesh;
-pub mod pair;
 pub mod reference;
-pub mod sampling;
-pub mod scene;
-pub mod solution;
-pub mod solve;
-pub mod transport;
 pub mod visibility;
+
+mod form_factors;
+mod geometry;
+mod hierarchy;
+mod input;
+mod mesh;
+mod pair;
+mod sampling;
+mod scene;
+mod solution;
+mod solve;
+mod transport;
 
 /// Which revision of the numerics this build solves with: bumped whenever the same scene and
 /// settings come out with different values (a new reconstruction, a changed rule), so that
 /// solutions cached by an earlier build are not served as this one's. 2: vertex values carry
-/// what interpolation misses of the direct light ([`gather`]).
+/// what interpolation misses of the direct light (`solution::vertices`).
 pub const SOLUTION_REVISION: u32 = 2;
 
-pub use form_factors::DenseFormFactors;
+pub use form_factors::{DenseFormFactors, UpdateStats};
+pub use geometry::Polygon;
 pub use hierarchy::{HierarchySettings, HierarchyStats};
-pub use input::{SceneError, load_gltf, load_obj, load_scene};
+pub use input::{
+    MAX_REFLECTANCE, MAX_SCENE_FILE_BYTES, SceneError, load_gltf, load_obj, load_scene,
+    read_scene_file,
+};
 pub use mesh::{Mesh, Patch, PatchTarget};
 pub use pair::FormFactorSettings;
-pub use scene::{Material, Rgb, Scene, View};
+pub use scene::texture::{Texture, TextureMap};
+pub use scene::{
+    Face, MAX_COORDINATE, MAX_EMISSION, MAX_TEXTURE_COORDINATE, Material, Rgb, Scene, SceneObject,
+    View, check_emission, check_translation,
+};
 pub use solution::pipeline::{Solved, solve_file, solve_mesh, solve_scene};
 pub use solution::report::{ObjectRadiosity, SolveReport, StageSeconds};
 pub use solution::request::{MethodChoice, SolveError, SolveRequest, starting_mesh};

@@ -39,7 +39,7 @@ impl SceneTarget {
                 });
                 // Through the loader's own reader: a library may be /dev/zero.
                 if let Some(name) = library
-                    && let Ok(mtl) = solver::input::read_scene_file(&folder.join(&name))
+                    && let Ok(mtl) = solver::read_scene_file(&folder.join(&name))
                 {
                     input.push((name, mtl.into_bytes()));
                 }

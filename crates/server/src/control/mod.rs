@@ -37,8 +37,8 @@ impl Field {
     /// The solver's rule for the values.
     fn check(self) -> fn([f64; 3]) -> Result<(), String> {
         match self {
-            Field::Emission => solver::scene::check_emission,
-            Field::Move => solver::scene::check_translation,
+            Field::Emission => solver::check_emission,
+            Field::Move => solver::check_translation,
         }
     }
 }

@@ -258,11 +258,11 @@ mod tests {
     #[test]
     fn the_digest_follows_content_and_settings() {
         let scene = |reflectance: f64| Scene {
-            objects: vec![solver::scene::SceneObject {
+            objects: vec![solver::SceneObject {
                 name: "wall".into(),
             }],
-            faces: vec![solver::scene::Face {
-                polygon: solver::geometry::Polygon::triangle(
+            faces: vec![solver::Face {
+                polygon: solver::Polygon::triangle(
                     glam::DVec3::ZERO,
                     glam::DVec3::X,
                     glam::DVec3::Y,

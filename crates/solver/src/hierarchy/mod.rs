@@ -41,12 +41,12 @@ mod tree;
 #[cfg(test)]
 pub(crate) mod fixtures;
 
+use crate::Progress;
 use crate::geometry::Polygon;
 use crate::pair::FormFactorSettings;
 use crate::scene::{Rgb, Scene};
 use crate::solve::{NeedsEntries, SolveOutcome, SolverSettings, System, solve};
 use crate::visibility::Occluders;
-use crate::Progress;
 use glam::DVec3;
 use operator::{Incoming, Slope};
 use rayon::prelude::*;
