@@ -1,6 +1,9 @@
-//! radcast-server as a library: the HTTP/WebSocket routes over a [`hub::Hub`], and the
-//! background solve that feeds it. `main.rs` only parses flags and binds a socket, so tests run
-//! the same server on an ephemeral port.
+//! radcast-server as a library, in the order data flows through it: [`publish`] (a scene made
+//! ready, the solver thread, the one conversion of solver values to wire types, the cache and
+//! the hub every viewer reads), [`http`] (accept, routes, one task per viewer, the page,
+//! metrics), [`control`] (edits in) and [`fanout`] (past one machine, through NATS); [`health`]
+//! is what they report. `main.rs` only parses flags and binds a socket, so tests run the same
+//! server on an ephemeral port.
 
 pub mod control;
 pub mod fanout;

@@ -4,7 +4,7 @@
 use crate::scene::Rgb;
 
 /// How light moves between patches: what every solver needs from form factors. A dense matrix
-/// and a hierarchical link list ([`crate::hierarchy::Hierarchy`]) both implement it.
+/// and a hierarchical link list (`hierarchy::Hierarchy`) both implement it.
 pub trait Transport: Sync {
     /// Number of patches (rows and columns).
     fn patch_count(&self) -> usize;

@@ -30,7 +30,7 @@ pub struct Face {
     /// Emitted radiosity per channel, W/m^2, finite and >= 0.
     pub emission: Rgb,
     /// The face of the scene file this is (a piece of): its index among the loaded faces
-    /// before contact lines cut them ([`crate::input`]). Reference probes name these, so a
+    /// before contact lines cut them (when a scene file is loaded). Reference probes name these, so a
     /// reference holds however the faces are cut.
     pub source: u32,
     /// Where the face's points fall in its texture, for a textured face (viewers show the

@@ -42,7 +42,7 @@ impl Default for SolveRequest {
 pub enum MethodChoice {
     /// A uniform mesh and its dense form-factor matrix, solved with this method.
     Dense(Method),
-    /// [`crate::hierarchy`].
+    /// Hierarchical radiosity with clustering (the `hierarchy` module).
     Hierarchical,
 }
 
@@ -104,7 +104,7 @@ pub fn dense_mesh(scene: &Scene, request: &SolveRequest) -> Result<Mesh, SolveEr
     Ok(Mesh::build(scene, request.patches))
 }
 
-/// The mesh a solve of `request` starts from: the uniform mesh ([`dense_mesh`]), or one patch
+/// The mesh a solve of `request` starts from: the uniform mesh (`dense_mesh`), or one patch
 /// per face for a hierarchy, whose refinement decides the leaves later.
 pub fn starting_mesh(scene: &Scene, request: &SolveRequest) -> Result<Mesh, SolveError> {
     match request.hierarchy {

@@ -348,7 +348,7 @@ impl Session {
     }
 
     /// Radiosity at every mesh corner, W/m^2: what viewers are sent and interpolate
-    /// ([`CornerLight::corner_radiosity`]: direct light gathered at the corner, indirect light
+    /// (`CornerLight::corner_radiosity`: direct light gathered at the corner, indirect light
     /// from the patches around it).
     pub fn vertex_radiosity(&self) -> Vec<Rgb> {
         self.corner_light.corner_radiosity(
