@@ -306,9 +306,6 @@ pub(super) fn tangent_coordinates(patch: &Patch, point: DVec3) -> [f32; 2] {
     [d.dot(tangent) as f32, d.dot(bitangent) as f32]
 }
 
-/// The receiver quadrature level for the factor between elements `p` and `q`: the dense
-/// path's near-field rule, and at least 3 when the factor varies over the receiver more than its
-/// four-point mean (a source seen from only part of the receiver, which those points can miss).
 /// The receiver's point nearest the source's centroid, moved a little toward the side the
 /// source faces: where a source close beside a large receiver (a box standing on the floor)
 /// sends the most. Gauss points, corners and centroid all lie far from such a source and saw
@@ -320,6 +317,9 @@ fn nearest_in_front(p: &Patch, q: &Patch) -> DVec3 {
         .closest_point(nearest + toward_front.normalize_or_zero() * (1e-3 * p.radius))
 }
 
+/// The receiver quadrature level for the factor between elements `p` and `q`: the dense
+/// path's near-field rule, and at least 3 when the factor varies over the receiver more than its
+/// four-point mean (a source seen from only part of the receiver, which those points can miss).
 fn integration_level(p: &Patch, q: &Patch, mean: f64, spread: f64) -> u32 {
     let near = near_pair_level(p, q).unwrap_or(1);
     if spread > mean { near.max(3) } else { near }

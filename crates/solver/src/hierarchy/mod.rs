@@ -25,11 +25,11 @@
 //! - **Solving**: pull (area-weighted means up the trees), gather along links, push (sums down
 //!   to the leaves) is a linear operator on the leaves, so it is a [`Transport`] and the same
 //!   GMRES and Jacobi solve it. No dense matrix anywhere: memory is O(elements + links).
-
 //!
-//! Files: [`tree`] the trees, [`shaft`] the blockers between a pair, [`refine`] the link
-//! decisions and the leaf budget, [`operator`] pull-gather-push on the leaves, [`reach`] the
-//! buried test; this file holds the public API and the refinement rounds.
+//! Files: [`tree`] the trees, [`shaft`] the blockers between a pair, [`factor`] a link's factor
+//! ([`factor::LinkFactors`]), [`refine`] the link decisions ([`refine::Decider`], which holds
+//! the factors) and the budgets, [`operator`] pull-gather-push on the leaves, [`reach`] the
+//! buried test; this file holds the public API, the budget loop and the refinement rounds.
 
 mod factor;
 mod operator;
