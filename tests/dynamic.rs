@@ -264,8 +264,38 @@ async fn rapid_changes_coalesce_and_the_newest_wins() {
 
 #[test]
 fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation() {
+    let mut session = move_matches_a_fresh_computation(request().patches);
+    // Unknown objects and non-finite offsets are refused.
+    let offset = glam::dvec3(40.0, 0.0, -30.0);
+    assert_eq!(
+        session.move_object("sofa", offset),
+        Err(solver::EditError::UnknownObject("sofa".into()))
+    );
+    assert!(
+        session
+            .move_object("short_block", glam::dvec3(f64::NAN, 0.0, 0.0))
+            .is_err()
+    );
+}
+
+/// At the default patch count a floor patch lies under the short block: every ray from it
+/// meets a back face, so its row was scaled to zero, and the incremental update could not
+/// unscale it once the block moved away (0 / 0: the whole row NaN, the solve stopped at once,
+/// and the server served the old light as final).
+#[test]
+fn a_move_that_uncovers_a_buried_patch_matches_a_fresh_computation() {
+    move_matches_a_fresh_computation(PatchTarget::Count(1000));
+}
+
+/// Moves the Cornell box's short block on `patches` after an emission edit, and checks the
+/// solution against form factors computed afresh on the moved mesh (to the solver's tolerance)
+/// and against the moved scene meshed anew; returns the session for more edits.
+fn move_matches_a_fresh_computation(patches: PatchTarget) -> solver::Session {
     // A tight tolerance, so warm and cold solves agree closely even on dim patches.
-    let mut request = request();
+    let mut request = SolveRequest {
+        patches,
+        ..request()
+    };
     request.solver.tolerance = 1e-10;
     let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
     let mesh = solver::Mesh::build(&scene, request.patches);
@@ -280,7 +310,8 @@ fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation
     let MoveWork::Dense(work) = moved.work else {
         panic!("a dense session updates its matrix: {moved:?}")
     };
-    session.solve(&solver::no_progress);
+    let report = session.solve(&solver::no_progress);
+    assert!(report.converged, "the moved scene solves: {report:?}");
 
     // From scratch: the same scene with the block moved and the light dimmed.
     let mut fresh_scene = scene.clone();
@@ -362,16 +393,7 @@ fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation
     );
     assert!(work.pairs > 0 && work.pairs < all_pairs, "{moved:?}");
     assert!(work.entries < n * n / 2, "{moved:?}");
-    // Unknown objects and non-finite offsets are refused.
-    assert_eq!(
-        session.move_object("sofa", offset),
-        Err(solver::EditError::UnknownObject("sofa".into()))
-    );
-    assert!(
-        session
-            .move_object("short_block", glam::dvec3(f64::NAN, 0.0, 0.0))
-            .is_err()
-    );
+    session
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -364,7 +364,10 @@ impl DenseFormFactors {
             .filter(|(i, _)| !changed[*i].is_empty())
             .for_each(|(i, (row, scale))| {
                 let clear_row = &clear[i * n..(i + 1) * n];
-                if moved[i] {
+                // A row scaled to zero (a closed view of back faces only: a patch under a box)
+                // cannot be unscaled to its raw values; it is integrated whole, like a moved
+                // receiver's.
+                if moved[i] || *scale == 0.0 {
                     entries.fetch_add(n, Ordering::Relaxed);
                     *scale = normalise_row(
                         patches,

@@ -44,6 +44,8 @@ pub struct Session {
     corner_light: CornerLight,
     /// The solution for the scene's own emission.
     base: Vec<Rgb>,
+    /// Its relative residual (infinite before the first solve).
+    base_residual: f64,
     /// Per edited object, its responses.
     responses: BTreeMap<u32, Response>,
     /// Current emission of every edited object.
@@ -66,6 +68,8 @@ struct Response {
     unit: Vec<Rgb>,
     /// `R_k`: the radiosity its emission as loaded gives.
     original: Vec<Rgb>,
+    /// The larger relative residual of the solves that made them.
+    residual: f64,
 }
 
 /// An emission change that cannot be applied.
@@ -213,6 +217,7 @@ impl Session {
             area: mesh.patches.iter().map(|p| p.area).collect(),
             request: *request,
             base: radiosity.clone(),
+            base_residual: f64::INFINITY,
             responses: BTreeMap::new(),
             edited: BTreeMap::new(),
             seconds,
@@ -373,6 +378,7 @@ impl Session {
     pub fn adopt_solution(&mut self, radiosity: Vec<Rgb>) {
         assert_eq!(radiosity.len(), self.base.len(), "one radiosity per patch");
         self.base.clone_from(&radiosity);
+        self.base_residual = self.request.solver.tolerance;
         self.radiosity = radiosity;
     }
 
@@ -425,7 +431,7 @@ impl Session {
         };
         let unit = self.solve_for(&mask(&|_| Rgb::ONE), None, &no_progress);
         let original_emission = mask(&|i| self.emission[i]);
-        let mut iterations = unit.iterations;
+        let (mut iterations, mut residual) = (unit.iterations, unit.residual);
         // Uniform original emission needs no second solve: its response is e * G.
         let first = original_emission
             .iter()
@@ -442,6 +448,7 @@ impl Session {
         } else {
             let solved = self.solve_for(&original_emission, None, &no_progress);
             iterations += solved.iterations;
+            residual = worse(residual, solved.residual);
             solved.radiosity
         };
         self.responses.insert(
@@ -449,6 +456,7 @@ impl Session {
             Response {
                 unit: unit.radiosity,
                 original,
+                residual,
             },
         );
         iterations
@@ -475,14 +483,17 @@ impl Session {
             // From the current answer: after a move, most of it still holds.
             let outcome = self.solve_for(&self.emission, Some(&self.radiosity), progress);
             self.base.clone_from(&outcome.radiosity);
+            self.base_residual = outcome.residual;
             self.radiosity = outcome.radiosity;
             (outcome.iterations, outcome.residual, outcome.converged)
         } else {
             let edited: Vec<(u32, Rgb)> = self.edited.iter().map(|(o, e)| (*o, *e)).collect();
             let iterations = edited.iter().map(|(o, _)| self.ensure_response(*o)).sum();
             let mut radiosity = self.base.clone();
+            let mut residual = self.base_residual;
             for (object, emission) in edited {
                 let response = &self.responses[&object];
+                residual = worse(residual, response.residual);
                 for ((b, g), r) in radiosity
                     .iter_mut()
                     .zip(&response.unit)
@@ -494,7 +505,12 @@ impl Session {
             // Clamp round-off below zero, as the solver does.
             radiosity.iter_mut().for_each(|b| *b = b.max(Rgb::ZERO));
             self.radiosity = radiosity;
-            (iterations, self.request.solver.tolerance, true)
+            // A sum is as good as its worst part: never final while one did not converge.
+            (
+                iterations,
+                residual,
+                residual <= self.request.solver.tolerance,
+            )
         };
         self.seconds.solve = clock.elapsed().as_secs_f64();
         self.seconds.total = self.seconds.mesh + self.seconds.form_factors + self.seconds.solve;
@@ -548,6 +564,15 @@ impl Session {
     }
 }
 
+/// The larger of two residuals, NaN (a solve that broke down) over any number.
+fn worse(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -590,6 +615,33 @@ mod tests {
         };
         let mesh = Mesh::build(scene, request.patches);
         Session::new(scene, &mesh, &request, &no_progress).expect("a small dense matrix")
+    }
+
+    #[test]
+    fn an_edit_is_final_only_when_every_solve_it_sums_converged() {
+        let scene = two_lamp_box();
+        let request = SolveRequest {
+            patches: PatchTarget::Count(96),
+            ..SolveRequest::default()
+        };
+        let mesh = Mesh::build(&scene, request.patches);
+        let mut live = Session::new(&scene, &mesh, &request, &no_progress).unwrap();
+        assert!(live.solve(&no_progress).converged);
+        live.set_emission("floor", Rgb::ONE).unwrap();
+        let summed = live.solve(&no_progress);
+        assert!(summed.converged && summed.residual <= request.solver.tolerance);
+        // The same edit on a session whose solver stops after one iteration: the responses
+        // it sums did not converge, and the sum must not say it did.
+        let mut starved = request;
+        starved.solver.max_iterations = 1;
+        let mut live = Session::new(&scene, &mesh, &starved, &no_progress).unwrap();
+        assert!(!live.solve(&no_progress).converged);
+        live.set_emission("floor", Rgb::ONE).unwrap();
+        let summed = live.solve(&no_progress);
+        assert!(
+            !summed.converged && summed.residual > starved.solver.tolerance,
+            "{summed:?}"
+        );
     }
 
     #[test]
