@@ -3,7 +3,7 @@
 //! cannot decide visibility, and sampled point pairs where a cluster takes part.
 
 use super::Hierarchy;
-use super::shaft::Visibility;
+use super::shaft::{Visibility, shaft_visibility};
 use super::tree::{Bounds, Element, Node};
 use crate::geometry::point_to_polygon_form_factor;
 use crate::mesh::Patch;
@@ -78,7 +78,7 @@ impl<'a> LinkFactors<'a> {
     }
 
     pub(super) fn node(&self, n: u32) -> &Node {
-        &self.hierarchy.nodes[n as usize]
+        &self.hierarchy.tree.nodes[n as usize]
     }
 
     /// The factor of a pair before refinement decides, with its spread over the receiver
@@ -107,7 +107,7 @@ impl<'a> LinkFactors<'a> {
             p.polygon.corners().iter().for_each(|c| extend(at(*c)));
             extend(at(p.centroid));
             extend(at(nearest_in_front(p, q)));
-            let visibility = self.hierarchy.shaft_visibility(p, q);
+            let visibility = shaft_visibility(&self.hierarchy.tree, p, q);
             if visibility != Visibility::Partial {
                 self.shaft_decided.fetch_add(1, Ordering::Relaxed);
             }
@@ -192,8 +192,8 @@ impl<'a> LinkFactors<'a> {
         rays_per_point: u32,
     ) -> PartlyHidden {
         let (p, q) = (
-            self.hierarchy.element_patch(receiver),
-            self.hierarchy.element_patch(source),
+            self.hierarchy.tree.element_patch(receiver),
+            self.hierarchy.tree.element_patch(source),
         );
         let seed = pair_seed(receiver as usize, source as usize);
         let (mut factor, mut point, mut cast, mut least, mut most) =
@@ -258,8 +258,8 @@ impl<'a> LinkFactors<'a> {
         let seed = pair_seed(receiver as usize, source as usize);
         let (mut sum, mut cast) = (0.0, 0);
         for k in 0..CLUSTER_SAMPLES {
-            let x = self.hierarchy.sample(receiver, k, seed);
-            let y = self.hierarchy.sample(source, k, splitmix64(seed));
+            let x = self.hierarchy.tree.sample(receiver, k, seed);
+            let y = self.hierarchy.tree.sample(source, k, splitmix64(seed));
             let d = y.position - x.position;
             if d == DVec3::ZERO {
                 continue;
@@ -373,7 +373,7 @@ mod tests {
         let hierarchy = Hierarchy::cluster_tree(&scene);
         let occluders = Occluders::new(&scene);
         let factors = LinkFactors::new(&hierarchy, &occluders, FormFactorSettings::default());
-        let (floor, lamp) = (hierarchy.face_node[0], hierarchy.face_node[1]);
+        let (floor, lamp) = (hierarchy.tree.face_node[0], hierarchy.tree.face_node[1]);
         let hidden = factors.partly_hidden_factor(floor, lamp, 2, 16);
         hidden.most_visible - hidden.least_visible
     }
@@ -391,8 +391,8 @@ mod tests {
     fn the_transfer_centre_is_the_source_centroid_for_an_aligned_pair_and_leans_when_shifted() {
         let aligned = facing_squares(1.0, 0.0);
         let (p, q) = (
-            aligned.element_patch(aligned.face_node[0]),
-            aligned.element_patch(aligned.face_node[1]),
+            aligned.tree.element_patch(aligned.tree.face_node[0]),
+            aligned.tree.element_patch(aligned.tree.face_node[1]),
         );
         let centre = kernel_centre(p, q, 1);
         // Symmetric up to the sample pattern: within a few per cent of the half-width.
@@ -401,8 +401,8 @@ mod tests {
         // Shifted by +x, the part of the source nearest the receiver (its -x side) weighs most.
         let shifted = facing_squares(0.5, 1.0);
         let (p, q) = (
-            shifted.element_patch(shifted.face_node[0]),
-            shifted.element_patch(shifted.face_node[1]),
+            shifted.tree.element_patch(shifted.tree.face_node[0]),
+            shifted.tree.element_patch(shifted.tree.face_node[1]),
         );
         assert!(kernel_centre(p, q, 1).x < q.centroid.x - 0.05);
     }

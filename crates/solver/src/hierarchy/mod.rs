@@ -26,10 +26,13 @@
 //!   to the leaves) is a linear operator on the leaves, so it is a [`Transport`] and the same
 //!   GMRES and Jacobi solve it. No dense matrix anywhere: memory is O(elements + links).
 //!
-//! Files: [`tree`] the trees, [`shaft`] the blockers between a pair, [`factor`] a link's factor
-//! ([`factor::LinkFactors`]), [`refine`] the link decisions ([`refine::Decider`], which holds
-//! the factors) and the budgets, [`operator`] pull-gather-push on the leaves, [`reach`] the
-//! buried test; this file holds the public API, the budget loop and the refinement rounds.
+//! Files own their data: [`tree`] the trees ([`tree::Tree`]), [`reach`] how much of each node
+//! light reaches ([`reach::Reach`]), [`shaft`] the blockers between a pair (a function of the
+//! tree), [`factor`] a link's factor ([`factor::LinkFactors`]), [`refine`] the link decisions
+//! ([`refine::Decider`], which holds the factors), the budgets and the splits that grow the
+//! tree and the links; [`operator`] pull-gather-push on the leaves (the links indexed by
+//! receiver, the row scales and slopes). This file holds the public API, the budget loop and
+//! the refinement rounds; [`Hierarchy`] is the tree, its reach and its links together.
 
 mod factor;
 mod operator;
@@ -42,16 +45,16 @@ mod tree;
 pub(crate) mod fixtures;
 
 use crate::Progress;
-use crate::geometry::Polygon;
+use crate::mesh::Mesh;
 use crate::pair::FormFactorSettings;
 use crate::scene::{Rgb, Scene};
 use crate::solve::{NeedsEntries, SolveOutcome, SolverSettings, System, solve};
 use crate::visibility::Occluders;
-use glam::DVec3;
 use operator::{Incoming, Slope};
 use rayon::prelude::*;
+use reach::Reach;
 use refine::{Attempt, Budget, Fineness, Overflow, Pass};
-use tree::Node;
+use tree::Tree;
 
 /// The one accuracy knob of the hierarchical path, and the budget that bounds its memory.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -142,37 +145,49 @@ pub struct HierarchyStats {
 /// The element and cluster trees of a scene, their links, and the link operator on the leaves.
 #[derive(Clone)]
 pub struct Hierarchy {
-    nodes: Vec<Node>,
-    /// Input faces in cluster order: every cluster covers a contiguous run.
-    order: Vec<u32>,
-    /// Prefix sums of face areas in `order` (for area-weighted sampling inside a cluster).
-    area_prefix: Vec<f64>,
-    /// Each input face's polygon.
-    faces: Vec<Polygon>,
-    /// Each input face's unit normal (cluster samples take it for every point).
-    face_normals: Vec<DVec3>,
-    /// Each input face's root element.
-    face_node: Vec<u32>,
+    /// The cluster tree and the element quadtrees, their leaves the patches.
+    tree: Tree,
+    /// How much of each node light can reach.
+    reach: Reach,
     /// Whether each input face's view is closed (its leaves' rows are normalised to one).
     face_closed: Vec<bool>,
     links: Vec<Link>,
-    /// The leaves, face by face.
-    leaves: Vec<u32>,
     /// Links by receiver: `incoming[offsets[n]..offsets[n + 1]]` are node `n`'s.
     offsets: Vec<u32>,
     incoming: Vec<Incoming>,
     /// Per leaf, the factor its gathered irradiance is multiplied by (1, or 1/row sum).
     row_scale: Vec<f64>,
-    /// Per node ever a leaf, the share of its area not buried ([`reach`]); NaN until measured.
-    seen_share: Vec<f64>,
-    /// Per node, the area of its leaves that light can reach: what a source's mean is taken over.
-    seen_area: Vec<f64>,
     /// Per element node, its linear radiosity model's weights ([`Hierarchy::slopes_of`]).
     slopes: Vec<Slope>,
     stats: HierarchyStats,
 }
 
 impl Hierarchy {
+    /// The cluster tree over `scene`'s faces, each face one unsplit element; no links yet.
+    pub(super) fn cluster_tree(scene: &Scene) -> Hierarchy {
+        let tree = Tree::over(scene);
+        let clusters = tree.nodes.iter().filter(|n| n.element.is_none()).count();
+        Hierarchy {
+            face_closed: vec![false; tree.face_node.len()],
+            tree,
+            reach: Reach::default(),
+            links: Vec::new(),
+            offsets: Vec::new(),
+            incoming: Vec::new(),
+            row_scale: Vec::new(),
+            slopes: Vec::new(),
+            stats: HierarchyStats {
+                clusters,
+                ..HierarchyStats::default()
+            },
+        }
+    }
+
+    /// The leaves as a mesh: face by face, corners shared between the leaves of a face.
+    pub fn leaf_mesh(&self) -> Mesh {
+        self.tree.leaf_mesh()
+    }
+
     /// What refinement and solving cost so far.
     pub fn stats(&self) -> HierarchyStats {
         self.stats
@@ -180,11 +195,11 @@ impl Hierarchy {
 
     /// Rebuilds the leaf list, the reached areas and the link operator after refinement.
     fn index(&mut self, occluders: &Occluders) {
-        self.collect_leaves();
-        self.measure_seen_area(occluders);
+        self.tree.collect_leaves();
+        self.reach.measure(&self.tree, occluders);
         self.fit_slopes();
         self.index_links();
-        self.stats.elements = self.leaves.len();
+        self.stats.elements = self.tree.leaves.len();
         self.stats.links = self.links.len();
     }
 
@@ -196,11 +211,11 @@ impl Hierarchy {
         settings: &SolverSettings,
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<SolveOutcome, NeedsEntries> {
-        let reflectance: Vec<Rgb> = (0..self.leaves.len())
-            .map(|i| self.leaf_patch(i).reflectance)
+        let reflectance: Vec<Rgb> = (0..self.tree.leaves.len())
+            .map(|i| self.tree.leaf_patch(i).reflectance)
             .collect();
-        let area: Vec<f64> = (0..self.leaves.len())
-            .map(|i| self.leaf_patch(i).area)
+        let area: Vec<f64> = (0..self.tree.leaves.len())
+            .map(|i| self.tree.leaf_patch(i).area)
             .collect();
         solve(
             self,
@@ -217,8 +232,8 @@ impl Hierarchy {
 
     /// The leaves' emission, W/m^2.
     pub fn leaf_emission(&self) -> Vec<Rgb> {
-        (0..self.leaves.len())
-            .map(|i| self.leaf_patch(i).emission)
+        (0..self.tree.leaves.len())
+            .map(|i| self.tree.leaf_patch(i).emission)
             .collect()
     }
 
@@ -233,18 +248,19 @@ impl Hierarchy {
         solver: &SolverSettings,
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<BuiltHierarchy, NeedsEntries> {
-        let mut tree = Hierarchy::cluster_tree(scene);
-        tree.face_closed = tree
+        let mut unrefined = Hierarchy::cluster_tree(scene);
+        unrefined.face_closed = unrefined
+            .tree
             .face_node
             .par_iter()
             .enumerate()
             .map(|(face, &n)| {
                 occluders
-                    .closed_view_share(tree.element_patch(n), face)
+                    .closed_view_share(unrefined.tree.element_patch(n), face)
                     .is_some()
             })
             .collect();
-        tree.index(occluders);
+        unrefined.index(occluders);
         let run = Rounds {
             occluders,
             rays,
@@ -268,7 +284,7 @@ impl Hierarchy {
                     Overflow::Freeze
                 },
             };
-            let limit = match run.refine(tree.clone(), knob, budget)? {
+            let limit = match run.refine(unrefined.clone(), knob, budget)? {
                 Attempt::Done(built) => return Ok(built),
                 Attempt::Abandoned(limit) => limit,
             };
@@ -312,13 +328,13 @@ impl Rounds<'_> {
         budget: Budget,
     ) -> Result<Attempt<BuiltHierarchy>, NeedsEntries> {
         let smallest = MIN_RADIUS_PER_ERROR * knob;
-        let mut radiosity: Vec<Rgb> = (0..hierarchy.leaves.len())
+        let mut radiosity: Vec<Rgb> = (0..hierarchy.tree.leaves.len())
             .map(|i| {
-                let patch = hierarchy.leaf_patch(i);
+                let patch = hierarchy.tree.leaf_patch(i);
                 patch.emission + patch.reflectance * self.estimate
             })
             .collect();
-        let mut pending = if hierarchy.nodes.is_empty() {
+        let mut pending = if hierarchy.tree.nodes.is_empty() {
             Vec::new()
         } else {
             vec![(0, 0)]
@@ -336,7 +352,7 @@ impl Rounds<'_> {
             }
             let sources = hierarchy.node_radiosity(&radiosity);
             let target = Fineness {
-                tolerance: knob * hierarchy.mean_reflected(&radiosity),
+                tolerance: knob * hierarchy.reach.mean_reflected(&hierarchy.tree, &radiosity),
                 smallest,
             };
             if round > 0 {
@@ -345,7 +361,7 @@ impl Rounds<'_> {
                     break;
                 }
             }
-            let (before, inherited) = (hierarchy.nodes.len(), hierarchy.pull(&radiosity));
+            let (before, inherited) = (hierarchy.tree.nodes.len(), hierarchy.pull(&radiosity));
             let refinement = hierarchy.refine(
                 sources,
                 &target,

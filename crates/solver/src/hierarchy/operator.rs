@@ -39,17 +39,17 @@ impl Hierarchy {
     /// (the Cornell floor sent 4-9% too little, measured against dense factors on the same leaves).
     /// A node with no reached area sends nothing.
     pub(super) fn pull(&self, leaf_radiosity: &[Rgb]) -> Vec<Rgb> {
-        let mut node_radiosity = vec![Rgb::ZERO; self.nodes.len()];
-        for (i, &leaf) in self.leaves.iter().enumerate() {
+        let mut node_radiosity = vec![Rgb::ZERO; self.tree.nodes.len()];
+        for (i, &leaf) in self.tree.leaves.iter().enumerate() {
             node_radiosity[leaf as usize] = leaf_radiosity[i];
         }
-        for n in (0..self.nodes.len()).rev() {
-            let node = &self.nodes[n];
-            if node.child_count > 0 && self.seen_area[n] > 0.0 {
+        for n in (0..self.tree.nodes.len()).rev() {
+            let node = &self.tree.nodes[n];
+            if node.child_count > 0 && self.reach.seen_area[n] > 0.0 {
                 let sum = node.children().fold(Rgb::ZERO, |sum, c| {
-                    sum + node_radiosity[c as usize] * self.seen_area[c as usize]
+                    sum + node_radiosity[c as usize] * self.reach.seen_area[c as usize]
                 });
-                node_radiosity[n] = sum / self.seen_area[n];
+                node_radiosity[n] = sum / self.reach.seen_area[n];
             }
         }
         node_radiosity
@@ -61,11 +61,14 @@ impl Hierarchy {
     /// (the Cornell floor under its lamp; energy -2.3% at knob 0.02, -0.9% with slopes read
     /// within their reach).
     pub(super) fn slopes_of(&self, means: &[Rgb]) -> Vec<[Rgb; 2]> {
-        (0..self.nodes.len())
+        (0..self.tree.nodes.len())
             .into_par_iter()
             .map(|n| {
                 let mut gradient = [Rgb::ZERO; 2];
-                for (c, weights) in self.nodes[n].children().zip(&self.slopes[n].child_weights) {
+                for (c, weights) in self.tree.nodes[n]
+                    .children()
+                    .zip(&self.slopes[n].child_weights)
+                {
                     gradient[0] += means[c as usize] * weights[0];
                     gradient[1] += means[c as usize] * weights[1];
                 }
@@ -85,21 +88,26 @@ impl Hierarchy {
     /// The weighted least-squares slope of each element node's children's means (weights: their
     /// reached area), as weights on those means; zero for leaves, clusters and degenerate fits.
     pub(super) fn fit_slopes(&mut self) {
-        self.slopes = (0..self.nodes.len())
+        self.slopes = (0..self.tree.nodes.len())
             .into_par_iter()
             .map(|n| {
-                let node = &self.nodes[n];
-                let (Some(element), true) = (&node.element, self.seen_area[n] > 0.0) else {
+                let node = &self.tree.nodes[n];
+                let (Some(element), true) = (&node.element, self.reach.seen_area[n] > 0.0) else {
                     return Slope::default();
                 };
                 let (tangent, bitangent) = element.patch.normal.any_orthonormal_pair();
                 let frame = |p: DVec3| [p.dot(tangent), p.dot(bitangent)];
                 let children: Vec<(f64, DVec3)> = node
                     .children()
-                    .map(|c| (self.seen_area[c as usize], self.nodes[c as usize].centroid))
+                    .map(|c| {
+                        (
+                            self.reach.seen_area[c as usize],
+                            self.tree.nodes[c as usize].centroid,
+                        )
+                    })
                     .collect();
                 let mean_centre =
-                    children.iter().map(|(w, c)| *c * *w).sum::<DVec3>() / self.seen_area[n];
+                    children.iter().map(|(w, c)| *c * *w).sum::<DVec3>() / self.reach.seen_area[n];
                 let offsets: Vec<[f64; 2]> = children
                     .iter()
                     .map(|(_, c)| frame(*c - mean_centre))
@@ -134,18 +142,16 @@ impl Hierarchy {
             })
             .collect();
     }
-}
 
-impl Hierarchy {
     /// Groups the links by receiver and measures each leaf's row sum: a leaf of a face whose
     /// view is closed sends all its light to surfaces, so its row is scaled to sum to one.
     pub(super) fn index_links(&mut self) {
         // Links grouped by receiver (a counting sort).
-        let mut offsets = vec![0u32; self.nodes.len() + 1];
+        let mut offsets = vec![0u32; self.tree.nodes.len() + 1];
         for link in &self.links {
             offsets[link.receiver as usize + 1] += 1;
         }
-        for n in 0..self.nodes.len() {
+        for n in 0..self.tree.nodes.len() {
             offsets[n + 1] += offsets[n];
         }
         let mut cursor = offsets.clone();
@@ -164,13 +170,13 @@ impl Hierarchy {
         // Row sums: what each leaf gathers when every radiosity is one. A leaf of a face whose
         // view is closed sends all its light to surfaces, so its row must sum to the share of
         // it that light reaches (one, but where a box stands on it).
-        self.row_scale = vec![1.0; self.leaves.len()];
-        let mut sums = vec![Rgb::ZERO; self.leaves.len()];
-        self.gather(&vec![Rgb::ONE; self.leaves.len()], &mut sums);
-        for (i, &leaf) in self.leaves.iter().enumerate() {
-            let face = self.element_patch(leaf).face;
+        self.row_scale = vec![1.0; self.tree.leaves.len()];
+        let mut sums = vec![Rgb::ZERO; self.tree.leaves.len()];
+        self.gather(&vec![Rgb::ONE; self.tree.leaves.len()], &mut sums);
+        for (i, &leaf) in self.tree.leaves.iter().enumerate() {
+            let face = self.tree.element_patch(leaf).face;
             if self.face_closed[face as usize] && sums[i].x > 0.0 {
-                self.row_scale[i] = self.seen_share[leaf as usize] / sums[i].x;
+                self.row_scale[i] = self.reach.seen_share[leaf as usize] / sums[i].x;
             }
         }
     }
@@ -178,11 +184,12 @@ impl Hierarchy {
     /// Per leaf, the value of `node_values` (taken before refinement added nodes from `before`
     /// on): a new leaf starts from its parent's value.
     pub(super) fn inherit(&self, mut node_values: Vec<Rgb>, before: usize) -> Vec<Rgb> {
-        node_values.resize(self.nodes.len(), Rgb::ZERO);
-        for n in before..self.nodes.len() {
-            node_values[n] = node_values[self.nodes[n].parent as usize];
+        node_values.resize(self.tree.nodes.len(), Rgb::ZERO);
+        for n in before..self.tree.nodes.len() {
+            node_values[n] = node_values[self.tree.nodes[n].parent as usize];
         }
-        self.leaves
+        self.tree
+            .leaves
             .iter()
             .map(|&n| node_values[n as usize])
             .collect()
@@ -191,13 +198,13 @@ impl Hierarchy {
 
 impl Transport for Hierarchy {
     fn patch_count(&self) -> usize {
-        self.leaves.len()
+        self.tree.leaves.len()
     }
 
     fn gather(&self, radiosity: &[Rgb], out: &mut [Rgb]) {
         let means = self.pull(radiosity);
         let slopes = self.slopes_of(&means);
-        let mut down: Vec<Rgb> = (0..self.nodes.len())
+        let mut down: Vec<Rgb> = (0..self.tree.nodes.len())
             .into_par_iter()
             .map(|n| {
                 let links = &self.incoming[self.offsets[n] as usize..self.offsets[n + 1] as usize];
@@ -212,14 +219,14 @@ impl Transport for Hierarchy {
             })
             .collect();
         // Push: parents come before children, so one forward pass sums each leaf's ancestors.
-        for n in 0..self.nodes.len() {
-            let parent = self.nodes[n].parent;
+        for n in 0..self.tree.nodes.len() {
+            let parent = self.tree.nodes[n].parent;
             if parent != NONE {
                 down[n] = down[n] + down[parent as usize];
             }
         }
         for (i, o) in out.iter_mut().enumerate() {
-            *o = down[self.leaves[i] as usize] * self.row_scale[i];
+            *o = down[self.tree.leaves[i] as usize] * self.row_scale[i];
         }
     }
 }
@@ -237,8 +244,8 @@ mod tests {
         for error in [0.1, 0.03] {
             let hierarchy = build(&scene, error);
             assert!(hierarchy.face_closed.iter().all(|c| *c));
-            let mut sums = vec![Rgb::ZERO; hierarchy.leaves.len()];
-            hierarchy.gather(&vec![Rgb::ONE; hierarchy.leaves.len()], &mut sums);
+            let mut sums = vec![Rgb::ZERO; hierarchy.tree.leaves.len()];
+            hierarchy.gather(&vec![Rgb::ONE; hierarchy.tree.leaves.len()], &mut sums);
             let worst = sums
                 .iter()
                 .zip(&hierarchy.row_scale)
@@ -246,7 +253,7 @@ mod tests {
                 .fold(0.0, f64::max);
             println!(
                 "error {error}: {} leaves, {} links, worst raw row sum off by {worst:.4}",
-                hierarchy.leaves.len(),
+                hierarchy.tree.leaves.len(),
                 hierarchy.links.len()
             );
             assert!(
@@ -264,13 +271,15 @@ mod tests {
         scene.faces.iter_mut().for_each(|f| f.emission = Rgb::ONE);
         for error in [0.1, 0.05] {
             let hierarchy = build(&scene, error);
-            let mut sums = vec![Rgb::ZERO; hierarchy.leaves.len()];
-            hierarchy.gather(&vec![Rgb::ONE; hierarchy.leaves.len()], &mut sums);
+            let mut sums = vec![Rgb::ZERO; hierarchy.tree.leaves.len()];
+            hierarchy.gather(&vec![Rgb::ONE; hierarchy.tree.leaves.len()], &mut sums);
             let worst = sums
                 .iter()
                 .zip(&hierarchy.row_scale)
                 .enumerate()
-                .filter(|(i, _)| hierarchy.seen_share[hierarchy.leaves[*i] as usize] > 0.0)
+                .filter(|(i, _)| {
+                    hierarchy.reach.seen_share[hierarchy.tree.leaves[*i] as usize] > 0.0
+                })
                 .map(|(_, (s, k))| (s.x / k - 1.0).abs())
                 .fold(0.0, f64::max);
             // What remains is the ray sampling of partly hidden pairs (wall leaves level with
@@ -283,21 +292,26 @@ mod tests {
     fn a_linear_radiosity_is_read_exactly_and_one_bright_quarter_never_below_zero() {
         let scene = room_with_a_box();
         let mut hierarchy = Hierarchy::cluster_tree(&scene);
-        let wall = hierarchy.face_node[2];
-        hierarchy.subdivide(wall);
-        for child in hierarchy.nodes[wall as usize].children() {
-            hierarchy.subdivide(child);
+        let wall = hierarchy.tree.face_node[2];
+        hierarchy.tree.subdivide(wall);
+        for child in hierarchy.tree.nodes[wall as usize].children() {
+            hierarchy.tree.subdivide(child);
         }
         hierarchy.index(&Occluders::new(&scene));
-        let (tangent, bitangent) = hierarchy.element_patch(wall).normal.any_orthonormal_pair();
-        let centroid = hierarchy.nodes[wall as usize].centroid;
+        let (tangent, bitangent) = hierarchy
+            .tree
+            .element_patch(wall)
+            .normal
+            .any_orthonormal_pair();
+        let centroid = hierarchy.tree.nodes[wall as usize].centroid;
         let linear = |p: DVec3| {
             3.0 + 0.5 * (p - centroid).dot(tangent) - 0.25 * (p - centroid).dot(bitangent)
         };
         let radiosity: Vec<Rgb> = hierarchy
+            .tree
             .leaves
             .iter()
-            .map(|&n| Rgb::splat(linear(hierarchy.nodes[n as usize].centroid)))
+            .map(|&n| Rgb::splat(linear(hierarchy.tree.nodes[n as usize].centroid)))
             .collect();
         let means = hierarchy.pull(&radiosity);
         let slopes = hierarchy.slopes_of(&means);
@@ -314,12 +328,13 @@ mod tests {
             );
         }
         // One bright grandchild quarter: every reading stays a mix of non-negative means.
-        let bright = hierarchy.nodes[wall as usize].first_child;
+        let bright = hierarchy.tree.nodes[wall as usize].first_child;
         let radiosity: Vec<Rgb> = hierarchy
+            .tree
             .leaves
             .iter()
             .map(|&n| {
-                if hierarchy.nodes[n as usize].parent == bright {
+                if hierarchy.tree.nodes[n as usize].parent == bright {
                     Rgb::ONE
                 } else {
                     Rgb::ZERO

@@ -135,7 +135,7 @@ impl Decider<'_> {
             (Some(e), Visibility::Partial | Visibility::Clear) => {
                 let centroid = estimate.centroid.unwrap_or_else(|| {
                     kernel_centre(
-                        self.factors.hierarchy.element_patch(receiver),
+                        self.factors.hierarchy.tree.element_patch(receiver),
                         &e.patch,
                         pair_seed(receiver as usize, source as usize),
                     )
@@ -173,7 +173,7 @@ impl Hierarchy {
         run: Pass,
     ) -> Attempt<()> {
         let budget = run.budget;
-        let (mut leaves, mut rays_cast, mut shaft_decided) = (self.leaves.len(), 0, 0);
+        let (mut leaves, mut rays_cast, mut shaft_decided) = (self.tree.leaves.len(), 0, 0);
         while !pending.is_empty() {
             // Links now plus pairs still to decide: what the links would be with no more splits.
             if self.links.len() + pending.len() > budget.max_links {
@@ -278,14 +278,14 @@ impl Hierarchy {
                 Decision::Keep(link) => self.links.push(link),
                 Decision::SplitReceiver => {
                     self.split_for(r, sources);
-                    next.extend(self.nodes[r as usize].children().map(|c| (c, s)));
+                    next.extend(self.tree.nodes[r as usize].children().map(|c| (c, s)));
                 }
                 Decision::SplitSource => {
                     self.split_for(s, sources);
-                    next.extend(self.nodes[s as usize].children().map(|c| (r, c)));
+                    next.extend(self.tree.nodes[s as usize].children().map(|c| (r, c)));
                 }
                 Decision::SplitBoth => {
-                    let children = self.nodes[r as usize].children();
+                    let children = self.tree.nodes[r as usize].children();
                     next.extend(
                         children
                             .clone()
@@ -304,7 +304,7 @@ impl Hierarchy {
         sources: &NodeRadiosity,
         target: &Fineness,
     ) -> Vec<(u32, u32)> {
-        let node = |n: u32| &self.nodes[n as usize];
+        let node = |n: u32| &self.tree.nodes[n as usize];
         let smallest = smallest_while(self.stats.leaf_budget_reached, target.smallest);
         let (redo, keep): (Vec<Link>, Vec<Link>) = self.links.par_iter().partition(|l| {
             let (r, s) = (node(l.receiver), node(l.source));
@@ -321,9 +321,9 @@ impl Hierarchy {
     /// The links or pairs `decision` on pair `(r, s)` makes: one kept link, or the pairs of
     /// the split end's children.
     fn pairs_made(&self, r: u32, s: u32, decision: &Decision) -> usize {
-        let children = |n: u32| match self.is_unsplit_element(n) {
+        let children = |n: u32| match self.tree.is_unsplit_element(n) {
             true => ELEMENT_CHILDREN,
-            false => self.nodes[n as usize].child_count as usize,
+            false => self.tree.nodes[n as usize].child_count as usize,
         };
         match decision {
             Decision::Drop => 0,
@@ -341,7 +341,7 @@ impl Hierarchy {
         pending: &[(u32, u32)],
         decisions: &[Decision],
     ) -> (Vec<usize>, usize) {
-        let mut marked = vec![false; self.nodes.len()];
+        let mut marked = vec![false; self.tree.nodes.len()];
         let (mut indices, mut added) = (Vec::new(), 0);
         for (i, (&(r, s), decision)) in pending.iter().zip(decisions).enumerate() {
             let n = match decision {
@@ -349,7 +349,7 @@ impl Hierarchy {
                 Decision::SplitSource => s,
                 _ => continue,
             };
-            if self.is_unsplit_element(n) {
+            if self.tree.is_unsplit_element(n) {
                 indices.push(i);
                 if !std::mem::replace(&mut marked[n as usize], true) {
                     // The element stops being a leaf; its children are.
@@ -362,13 +362,13 @@ impl Hierarchy {
 
     /// Subdivides `n` if it is an element, giving new children their parent's radiosity.
     fn split_for(&mut self, n: u32, sources: &mut NodeRadiosity) {
-        if self.is_unsplit_element(n) {
-            self.subdivide(n);
+        if self.tree.is_unsplit_element(n) {
+            self.tree.subdivide(n);
             let (mean, spread) = sources.at(n);
-            sources.mean.resize(self.nodes.len(), mean);
+            sources.mean.resize(self.tree.nodes.len(), mean);
             // A new child inherits its parent's mean; its spread is unknown but at most the
             // parent's.
-            sources.spread.resize(self.nodes.len(), spread);
+            sources.spread.resize(self.tree.nodes.len(), spread);
         }
     }
 
@@ -376,20 +376,21 @@ impl Hierarchy {
     /// its leaves, from per-leaf radiosity.
     pub(super) fn node_radiosity(&self, leaf_radiosity: &[Rgb]) -> NodeRadiosity {
         let mean = self.pull(leaf_radiosity);
-        let mut low = vec![f64::INFINITY; self.nodes.len()];
-        let mut high = vec![0.0f64; self.nodes.len()];
+        let mut low = vec![f64::INFINITY; self.tree.nodes.len()];
+        let mut high = vec![0.0f64; self.tree.nodes.len()];
         // A buried leaf sends nothing anyone gathers: its value is no spread of the source.
         for (i, &leaf) in self
+            .tree
             .leaves
             .iter()
             .enumerate()
-            .filter(|(_, leaf)| self.seen_area[**leaf as usize] > 0.0)
+            .filter(|(_, leaf)| self.reach.seen_area[**leaf as usize] > 0.0)
         {
             let b = leaf_radiosity[i].max_element();
             (low[leaf as usize], high[leaf as usize]) = (b, b);
         }
-        for n in (0..self.nodes.len()).rev() {
-            for c in self.nodes[n].children() {
+        for n in (0..self.tree.nodes.len()).rev() {
+            for c in self.tree.nodes[n].children() {
                 low[n] = low[n].min(low[c as usize]);
                 high[n] = high[n].max(high[c as usize]);
             }
@@ -507,9 +508,10 @@ mod tests {
         let error = 0.1;
         let hierarchy = build(&scene, error);
         let floor_leaves = hierarchy
+            .tree
             .leaves
             .iter()
-            .map(|&n| &hierarchy.nodes[n as usize])
+            .map(|&n| &hierarchy.tree.nodes[n as usize])
             .filter(|n| n.element.as_ref().is_some_and(|e| e.patch.face == 0));
         let finest = floor_leaves.map(|n| n.radius).fold(f64::INFINITY, f64::min);
         let (floor_radius, box_radius) = (

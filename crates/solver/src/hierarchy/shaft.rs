@@ -2,8 +2,7 @@
 //! Ray-Cast Radiosity"): the faces that can block a pair, found by walking the cluster tree, so
 //! that most links need no shadow rays at all.
 
-use super::Hierarchy;
-use super::tree::{Bounds, union};
+use super::tree::{Bounds, Tree, union};
 use crate::geometry::{Polygon, bounds};
 use crate::mesh::Patch;
 use glam::DVec3;
@@ -162,47 +161,45 @@ pub(super) enum Visibility {
     Sampled,
 }
 
-impl Hierarchy {
-    /// Clear, hidden or partial, from the faces in the shaft between `p` and `q`.
-    pub(super) fn shaft_visibility(&self, p: &Patch, q: &Patch) -> Visibility {
-        let (cp, cq) = (p.polygon.corners(), q.polygon.corners());
-        let shaft = Shaft::new(bounds(cp.iter().copied()), bounds(cq.iter().copied()));
-        let mut candidates = 0;
-        let mut stack = vec![0u32];
-        while let Some(n) = stack.pop() {
-            let node = &self.nodes[n as usize];
-            if !shaft.may_meet_box(node.bounds) {
-                continue;
-            }
-            let Some(element) = &node.element else {
-                stack.extend(node.children());
-                continue;
-            };
-            // An input face (the search never goes below them).
-            let face = element.patch.face;
-            let polygon = &self.faces[face as usize];
-            if face == p.face
-                || face == q.face
-                || !shaft.may_meet_points(polygon.corners())
-                || cannot_separate(polygon, element.patch.normal, cp, cq)
-            {
-                continue;
-            }
-            if blocks_every_segment(polygon, element.patch.normal, cp, cq) {
-                return Visibility::Hidden;
-            }
-            // Rays decide from here; looking further for a single face that hides everything
-            // costs a walk over every face in a shaft across a furnished room.
-            candidates += 1;
-            if candidates == MAX_BLOCKER_CANDIDATES {
-                return Visibility::Partial;
-            }
+/// Clear, hidden or partial, from the faces of `tree` in the shaft between `p` and `q`.
+pub(super) fn shaft_visibility(tree: &Tree, p: &Patch, q: &Patch) -> Visibility {
+    let (cp, cq) = (p.polygon.corners(), q.polygon.corners());
+    let shaft = Shaft::new(bounds(cp.iter().copied()), bounds(cq.iter().copied()));
+    let mut candidates = 0;
+    let mut stack = vec![0u32];
+    while let Some(n) = stack.pop() {
+        let node = &tree.nodes[n as usize];
+        if !shaft.may_meet_box(node.bounds) {
+            continue;
         }
-        if candidates == 0 {
-            return Visibility::Clear;
+        let Some(element) = &node.element else {
+            stack.extend(node.children());
+            continue;
+        };
+        // An input face (the search never goes below them).
+        let face = element.patch.face;
+        let polygon = &tree.faces[face as usize];
+        if face == p.face
+            || face == q.face
+            || !shaft.may_meet_points(polygon.corners())
+            || cannot_separate(polygon, element.patch.normal, cp, cq)
+        {
+            continue;
         }
-        Visibility::Partial
+        if blocks_every_segment(polygon, element.patch.normal, cp, cq) {
+            return Visibility::Hidden;
+        }
+        // Rays decide from here; looking further for a single face that hides everything
+        // costs a walk over every face in a shaft across a furnished room.
+        candidates += 1;
+        if candidates == MAX_BLOCKER_CANDIDATES {
+            return Visibility::Partial;
+        }
     }
+    if candidates == 0 {
+        return Visibility::Clear;
+    }
+    Visibility::Partial
 }
 
 #[cfg(test)]

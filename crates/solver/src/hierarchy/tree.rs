@@ -2,7 +2,6 @@
 //! Greenberg 1994), and under each face a quadtree of elements on an integer lattice
 //! (Hanrahan, Salzman, Aupperle 1991), split only when a link asks for it.
 
-use super::{Hierarchy, HierarchyStats};
 use crate::geometry::{Polygon, bounds};
 use crate::mesh::{Mesh, Patch};
 use crate::sampling::{splitmix64, stratified_uv};
@@ -53,8 +52,27 @@ pub(super) struct Node {
     pub(super) bounds: Bounds,
     /// Largest reflectance channel of anything below.
     pub(super) reflectance: f64,
-    /// Positions in [`Hierarchy::order`] of the input faces below.
+    /// Positions in [`Tree::order`] of the input faces below.
     pub(super) faces: Range<u32>,
+}
+
+/// The cluster tree over a scene's faces and the element quadtrees under them: the nodes and
+/// what sampling a cluster's surfaces needs.
+#[derive(Clone)]
+pub(super) struct Tree {
+    pub(super) nodes: Vec<Node>,
+    /// Input faces in cluster order: every cluster covers a contiguous run.
+    pub(super) order: Vec<u32>,
+    /// Prefix sums of face areas in `order` (for area-weighted sampling inside a cluster).
+    area_prefix: Vec<f64>,
+    /// Each input face's polygon.
+    pub(super) faces: Vec<Polygon>,
+    /// Each input face's unit normal (cluster samples take it for every point).
+    face_normals: Vec<DVec3>,
+    /// Each input face's root element.
+    pub(super) face_node: Vec<u32>,
+    /// The leaves, face by face ([`Tree::collect_leaves`]).
+    pub(super) leaves: Vec<u32>,
 }
 
 /// A point drawn on a node's surfaces.
@@ -151,9 +169,9 @@ pub(super) fn union(a: Bounds, b: Bounds) -> Bounds {
     (a.0.min(b.0), a.1.max(b.1))
 }
 
-impl Hierarchy {
-    /// The cluster tree over `scene`'s faces, each face one unsplit element; no links yet.
-    pub(super) fn cluster_tree(scene: &Scene) -> Hierarchy {
+impl Tree {
+    /// The cluster tree over `scene`'s faces, each face one unsplit element.
+    pub(super) fn over(scene: &Scene) -> Tree {
         let face_count = scene.faces.len();
         let mut order: Vec<u32> = (0..face_count as u32).collect();
         let centroids: Vec<DVec3> = scene.faces.iter().map(|f| f.polygon.centroid()).collect();
@@ -219,27 +237,14 @@ impl Hierarchy {
             *sum += scene.faces[f as usize].polygon.area();
             Some(*sum)
         }));
-        let clusters = nodes.iter().filter(|n| n.element.is_none()).count();
-        Hierarchy {
+        Tree {
             nodes,
             order,
             area_prefix,
             faces: scene.faces.iter().map(|f| f.polygon).collect(),
             face_normals: scene.faces.iter().map(|f| f.polygon.normal()).collect(),
             face_node,
-            face_closed: vec![false; face_count],
-            links: Vec::new(),
             leaves: Vec::new(),
-            offsets: Vec::new(),
-            incoming: Vec::new(),
-            row_scale: Vec::new(),
-            seen_share: Vec::new(),
-            seen_area: Vec::new(),
-            slopes: Vec::new(),
-            stats: HierarchyStats {
-                clusters,
-                ..HierarchyStats::default()
-            },
         }
     }
 
