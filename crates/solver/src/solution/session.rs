@@ -3,7 +3,7 @@
 
 use super::report::{ObjectRadiosity, SolveReport, StageSeconds};
 use super::request::{SolveError, SolveRequest, check_dense_size};
-use super::vertices::CornerLight;
+use super::vertices::{CornerLight, clamp_below_zero};
 use crate::form_factors::{DenseFormFactors, UpdateStats};
 use crate::hierarchy::{BuiltHierarchy, Hierarchy, HierarchyStats};
 use crate::mesh::Mesh;
@@ -46,6 +46,9 @@ pub struct Session {
     base: Vec<Rgb>,
     /// Its relative residual (infinite before the first solve).
     base_residual: f64,
+    /// Its vertex values before the clamp at zero, once solved: edits add their responses'
+    /// vertex values to these instead of rebuilding every vertex from the transport.
+    base_vertices: Option<Vec<Rgb>>,
     /// Per edited object, its responses.
     responses: BTreeMap<u32, Response>,
     /// Current emission of every edited object.
@@ -70,6 +73,10 @@ struct Response {
     original: Vec<Rgb>,
     /// The larger relative residual of the solves that made them.
     residual: f64,
+    /// The vertex values of `unit` (its object emitting one W/m^2), before the clamp at zero.
+    unit_vertices: Vec<Rgb>,
+    /// The vertex values of `original`, likewise.
+    original_vertices: Vec<Rgb>,
 }
 
 /// An emission change that cannot be applied.
@@ -218,6 +225,7 @@ impl Session {
             request: *request,
             base: radiosity.clone(),
             base_residual: f64::INFINITY,
+            base_vertices: None,
             responses: BTreeMap::new(),
             edited: BTreeMap::new(),
             seconds,
@@ -303,6 +311,7 @@ impl Session {
                 .for_each(|f| f.emission = emission);
         }
         self.responses.clear();
+        self.base_vertices = None;
         let corners = |scene: &Scene| {
             scene
                 .faces
@@ -353,14 +362,43 @@ impl Session {
     }
 
     /// Radiosity at every mesh corner, W/m^2: what viewers are sent and interpolate
-    /// (`CornerLight::corner_radiosity`: direct light gathered at the corner, indirect light
-    /// from the patches around it).
+    /// (`CornerLight::linear_corner_radiosity`: direct light gathered at the corner, indirect
+    /// light from the patches around it). After edits, the base solution's values plus each
+    /// edited object's response values: O(vertices × edited objects), no transport product.
     pub fn vertex_radiosity(&self) -> Vec<Rgb> {
-        self.corner_light.corner_radiosity(
+        let responses: Option<Vec<(&Response, Rgb)>> = self
+            .edited
+            .iter()
+            .map(|(object, emission)| self.responses.get(object).map(|r| (r, *emission)))
+            .collect();
+        let values = match (&self.base_vertices, responses) {
+            (Some(base), Some(responses)) => {
+                let mut values = base.clone();
+                for (response, emission) in responses {
+                    for ((v, g), r) in values
+                        .iter_mut()
+                        .zip(&response.unit_vertices)
+                        .zip(&response.original_vertices)
+                    {
+                        *v += *g * emission - *r;
+                    }
+                }
+                values
+            }
+            // Not solved since the last change: the values of what the patches hold now.
+            _ => self.linear_vertices(&self.radiosity, &self.current_emission()),
+        };
+        clamp_below_zero(values)
+    }
+
+    /// The vertex values of the patch solution `radiosity` under `emission`, before the clamp
+    /// at zero.
+    fn linear_vertices(&self, radiosity: &[Rgb], emission: &[Rgb]) -> Vec<Rgb> {
+        self.corner_light.linear_corner_radiosity(
             &self.mesh,
             self.factors.transport(),
-            &self.radiosity,
-            &self.current_emission(),
+            radiosity,
+            emission,
         )
     }
 
@@ -379,6 +417,7 @@ impl Session {
         assert_eq!(radiosity.len(), self.base.len(), "one radiosity per patch");
         self.base.clone_from(&radiosity);
         self.base_residual = self.request.solver.tolerance;
+        self.base_vertices = Some(self.linear_vertices(&radiosity, &self.emission));
         self.radiosity = radiosity;
     }
 
@@ -443,13 +482,18 @@ impl Session {
             .iter()
             .zip(&self.patch_objects)
             .all(|(e, o)| *o != object || *e == first);
-        let original = if uniform {
-            unit.radiosity.iter().map(|g| *g * first).collect()
+        let unit_vertices = self.linear_vertices(&unit.radiosity, &mask(&|_| Rgb::ONE));
+        let (original, original_vertices) = if uniform {
+            (
+                unit.radiosity.iter().map(|g| *g * first).collect(),
+                unit_vertices.iter().map(|g| *g * first).collect(),
+            )
         } else {
             let solved = self.solve_for(&original_emission, None, &no_progress);
             iterations += solved.iterations;
             residual = worse(residual, solved.residual);
-            solved.radiosity
+            let vertices = self.linear_vertices(&solved.radiosity, &original_emission);
+            (solved.radiosity, vertices)
         };
         self.responses.insert(
             object,
@@ -457,6 +501,8 @@ impl Session {
                 unit: unit.radiosity,
                 original,
                 residual,
+                unit_vertices,
+                original_vertices,
             },
         );
         iterations
@@ -484,6 +530,7 @@ impl Session {
             let outcome = self.solve_for(&self.emission, Some(&self.radiosity), progress);
             self.base.clone_from(&outcome.radiosity);
             self.base_residual = outcome.residual;
+            self.base_vertices = Some(self.linear_vertices(&outcome.radiosity, &self.emission));
             self.radiosity = outcome.radiosity;
             (outcome.iterations, outcome.residual, outcome.converged)
         } else {
@@ -615,6 +662,33 @@ mod tests {
         };
         let mesh = Mesh::build(scene, request.patches);
         Session::new(scene, &mesh, &request, &no_progress).expect("a small dense matrix")
+    }
+
+    #[test]
+    fn vertex_values_of_an_edit_are_the_sum_of_their_responses_values() {
+        let scene = two_lamp_box();
+        let mut live = session(&scene);
+        live.solve(&no_progress);
+        // Lights left on in every channel: a light switched off leaves patch values that cancel
+        // to round-off, which the patch clamp and the vertex clamp cut differently.
+        for (floor, ceiling) in [
+            (Rgb::new(3.0, 0.2, 1.0), Rgb::splat(0.1)),
+            (Rgb::ONE, Rgb::splat(5.0)),
+        ] {
+            live.set_emission("floor", floor).unwrap();
+            live.set_emission("ceiling", ceiling).unwrap();
+            live.solve(&no_progress);
+            let summed = live.vertex_radiosity();
+            let rebuilt =
+                clamp_below_zero(live.linear_vertices(live.radiosity(), &live.current_emission()));
+            let scale = rebuilt.iter().map(|v| v.max_element()).fold(0.0, f64::max);
+            let worst = summed
+                .iter()
+                .zip(&rebuilt)
+                .map(|(a, b)| (*a - *b).abs().max_element())
+                .fold(0.0, f64::max);
+            assert!(worst <= 1e-9 * scale, "{worst} of {scale}");
+        }
     }
 
     #[test]

@@ -171,7 +171,11 @@ impl CornerLight {
     /// instead of adding up; what interpolation misses is the direct light's second-order mean
     /// over the patch (from its corners and centroid) less the interpolated mean, so what
     /// viewers show of a patch holds its light where the direct light curves.
-    pub fn corner_radiosity(
+    ///
+    /// Linear in `radiosity` and `emission` together: what negative round-off leaves below zero
+    /// is not clamped here ([`clamp_below_zero`] does it last), so the values of a sum of
+    /// solutions are the sum of their values.
+    pub fn linear_corner_radiosity(
         &self,
         mesh: &Mesh,
         transport: &dyn Transport,
@@ -230,7 +234,7 @@ impl CornerLight {
                 // Buried on every side: no light arrives, only the face's own emission leaves.
                 let (sum, area) = sums[c];
                 let indirect = if area > 0.0 { sum / area } else { Rgb::ZERO };
-                (own_emission + reflectance * direct[c] + indirect).max(Rgb::ZERO)
+                own_emission + reflectance * direct[c] + indirect
             })
             .collect()
     }
@@ -426,6 +430,13 @@ fn seen_share(
         sample(k);
     });
     if total > 0.0 { seen / total } else { 0.0 }
+}
+
+/// `values` with what round-off left below zero raised to zero: radiosity is a sum of
+/// non-negative terms.
+pub fn clamp_below_zero(mut values: Vec<Rgb>) -> Vec<Rgb> {
+    values.iter_mut().for_each(|b| *b = b.max(Rgb::ZERO));
+    values
 }
 
 #[cfg(test)]
