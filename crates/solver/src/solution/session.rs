@@ -35,7 +35,8 @@ impl Factors {
 /// `B = (I - rho F)^-1 E`, so the session keeps, per edited object `k`, its response `G_k` to
 /// unit emission on its patches and `R_k` to its original emission; after edits,
 /// `B = B_base + sum_k (e_k * G_k - R_k)`: an O(n) sum per edit instead of a solve, exact to
-/// the solver tolerance. Each object costs one or two solves, once.
+/// the solver tolerance; the vertex values viewers are sent sum the same way from each
+/// response's own. Each object costs one or two solves and their vertex values, once.
 pub struct Session {
     scene: Scene,
     mesh: Mesh,
@@ -65,7 +66,7 @@ pub struct Session {
     radiosity: Vec<Rgb>,
 }
 
-/// What one object's emission does to every patch, W/m^2 per patch.
+/// What one object's emission does to every patch and vertex, W/m^2.
 struct Response {
     /// `G_k`: the radiosity its patches emitting one W/m^2 (each channel) give.
     unit: Vec<Rgb>,
