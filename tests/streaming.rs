@@ -609,6 +609,34 @@ async fn a_cache_that_cannot_be_written_is_reported_and_the_solution_still_serve
     assert_eq!(shared.health.total(server::health::Fault::CacheWrite), 1);
 }
 
+#[test]
+fn a_solve_short_of_its_tolerance_is_served_as_not_final_and_degrades_health() {
+    let mut request = SolveRequest {
+        patches: PatchTarget::Count(150),
+        ..SolveRequest::default()
+    };
+    request.solver.max_iterations = 2;
+    let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).unwrap();
+    let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
+    solve_and_publish(&prepared, &shared, None).unwrap();
+    let summary = routes::solution_summary(&shared);
+    assert!(!summary.is_final, "{summary:?}");
+    assert!(!summary.report.as_ref().unwrap().converged);
+    match shared.health.status() {
+        server::health::Status::Degraded(what) => assert!(
+            what.starts_with("the solve stopped after 2 iterations at relative residual ")
+                && what.ends_with("short of the tolerance 1.0e-6: the frames served are not final"),
+            "{what}"
+        ),
+        other => panic!("expected degraded, got {other:?}"),
+    }
+    assert_eq!(shared.health.total(server::health::Fault::NotConverged), 1);
+    assert!(
+        server::http::metrics::render(&shared)
+            .contains("radcast_faults_total{kind=\"not_converged\"} 1")
+    );
+}
+
 /// A TCP connection to `address` from the loopback address `from` (any 127.x.y.z works on Linux).
 async fn connect_from(from: &str, address: SocketAddr) -> tokio::net::TcpStream {
     let socket = tokio::net::TcpSocket::new_v4().unwrap();

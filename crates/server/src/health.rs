@@ -12,6 +12,9 @@ pub enum Fault {
     Edit,
     /// The finished solution could not be written to the cache (a restart solves again).
     CacheWrite,
+    /// The last solve stopped short of its tolerance (the iteration limit, or a breakdown):
+    /// the frames served are not final.
+    NotConverged,
     /// The solver thread ended: edits can no longer be applied. Never cleared.
     SolverStopped,
     /// NATS could not be reached or refused a write (origin: publishing; edge: reading).
@@ -25,9 +28,10 @@ pub enum Fault {
 
 impl Fault {
     /// Every kind, in `/metrics` order.
-    pub const ALL: [Fault; 6] = [
+    pub const ALL: [Fault; 7] = [
         Fault::Edit,
         Fault::CacheWrite,
+        Fault::NotConverged,
         Fault::SolverStopped,
         Fault::Nats,
         Fault::OriginSilent,
@@ -39,6 +43,7 @@ impl Fault {
         match self {
             Fault::Edit => "edit",
             Fault::CacheWrite => "cache_write",
+            Fault::NotConverged => "not_converged",
             Fault::SolverStopped => "solver_stopped",
             Fault::Nats => "nats",
             Fault::OriginSilent => "origin_silent",

@@ -160,12 +160,15 @@ pub fn solve_and_publish(
             .iter()
             .for_each(|warning| tracing::warn!("{warning}"));
     }
+    report_convergence(shared, &report);
     let report = report_for_viewers(&report);
     let report_json = serde_json::to_string(&report)?;
+    let converged = report.converged;
     // The report goes in before the final frame: a viewer that sees "final" may ask for it at once.
     *shared.report.lock().expect("report lock") = Some(report);
-    hub.publish(&vertex_radiosity, true);
-    if let Some(dir) = cache_dir {
+    // Final only when converged; an unconverged solution is served, never cached as an answer.
+    hub.publish(&vertex_radiosity, converged);
+    if let Some(dir) = cache_dir.filter(|_| converged) {
         let cached = CachedSolution {
             geometry: hub.geometry().encoded.to_vec(),
             radiosity,
@@ -276,6 +279,7 @@ fn apply(
     }
     let report = session.solve(&solver::no_progress);
     let vertex_radiosity = finite(to_f32(&session.vertex_radiosity()))?;
+    report_convergence(shared, &report);
     *shared.report.lock().expect("report lock") = Some(report_for_viewers(&report));
     // Health before the frame: a viewer that sees the new version sees its health too.
     match refused.is_empty() {
@@ -297,6 +301,21 @@ fn apply(
         session.prepare_emitters();
     }
     Ok(())
+}
+
+/// A solve that stopped short of its tolerance as [`Fault::NotConverged`] (its frames are
+/// published, not as final), cleared by the next one that converges.
+fn report_convergence(shared: &Shared, report: &solver::SolveReport) {
+    match report.converged {
+        true => shared.health.recovered(Fault::NotConverged),
+        false => shared.health.fault(
+            Fault::NotConverged,
+            format!(
+                "the solve stopped after {} iterations at relative residual {:.3e}, short of the tolerance {:.1e}: the frames served are not final",
+                report.iterations, report.residual, report.tolerance
+            ),
+        ),
+    }
 }
 
 /// `radiosity` if every value is finite: what the hub may publish.
