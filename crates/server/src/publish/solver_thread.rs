@@ -92,31 +92,8 @@ pub fn solve_and_publish(
     cache_dir: Option<&Path>,
 ) -> anyhow::Result<EditBase> {
     let hub = &shared.hub;
-    if let Some(dir) = cache_dir {
-        let path = cache::entry_path(dir, &prepared.digest);
-        let entry = cache::read(dir, &prepared.digest).and_then(|(cached, geometry)| {
-            serde_json::from_str::<SolveReport>(&cached.report_json)
-                .map(|report| (cached, geometry, report))
-                .map_err(|_| Rejected::Corrupt("its report does not parse"))
-        });
-        match entry {
-            Ok((cached, geometry, report)) => {
-                tracing::info!(path = %path.display(), "solution read from the cache");
-                *shared.report.lock().expect("report lock") = Some(report);
-                if geometry != *hub.geometry().model {
-                    // A hierarchy's leaves, without refining again.
-                    hub.replace_geometry(geometry);
-                }
-                hub.publish(&cached.vertex_radiosity, true);
-                return Ok(EditBase::Cached(cached.radiosity));
-            }
-            Err(Rejected::Missing) => {
-                tracing::info!(path = %path.display(), "no cached solution: solving")
-            }
-            Err(why) => {
-                tracing::warn!(path = %path.display(), "cache entry not used, {why}: solving again")
-            }
-        }
+    if let Some(radiosity) = cache_dir.and_then(|dir| publish_cached(prepared, shared, dir)) {
+        return Ok(EditBase::Cached(radiosity));
     }
     let log = ProgressLog::default();
     let mut session = prepared.session(&|p| log.report(p))?;
@@ -187,6 +164,38 @@ pub fn solve_and_publish(
         }
     }
     Ok(EditBase::Live(Box::new(session)))
+}
+
+/// Publishes `prepared`'s solution from the cache in `dir` when an entry proves to be this
+/// scene's and intact; returns its patch radiosity for later edits.
+fn publish_cached(prepared: &Prepared, shared: &Shared, dir: &Path) -> Option<Vec<[f32; 3]>> {
+    let hub = &shared.hub;
+    let path = cache::entry_path(dir, &prepared.digest);
+    let entry = cache::read(dir, &prepared.digest).and_then(|(cached, geometry)| {
+        serde_json::from_str::<SolveReport>(&cached.report_json)
+            .map(|report| (cached, geometry, report))
+            .map_err(|_| Rejected::Corrupt("its report does not parse"))
+    });
+    match entry {
+        Ok((cached, geometry, report)) => {
+            tracing::info!(path = %path.display(), "solution read from the cache");
+            *shared.report.lock().expect("report lock") = Some(report);
+            if geometry != *hub.geometry().model {
+                // A hierarchy's leaves, without refining again.
+                hub.replace_geometry(geometry);
+            }
+            hub.publish(&cached.vertex_radiosity, true);
+            Some(cached.radiosity)
+        }
+        Err(Rejected::Missing) => {
+            tracing::info!(path = %path.display(), "no cached solution: solving");
+            None
+        }
+        Err(why) => {
+            tracing::warn!(path = %path.display(), "cache entry not used, {why}: solving again");
+            None
+        }
+    }
 }
 
 /// Applies edits as they come until shutdown: each batch re-solves from the current answer
