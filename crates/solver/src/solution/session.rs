@@ -376,13 +376,12 @@ impl Session {
             (Some(base), Some(responses)) => {
                 let mut values = base.clone();
                 for (response, emission) in responses {
-                    for ((v, g), r) in values
-                        .iter_mut()
-                        .zip(&response.unit_vertices)
-                        .zip(&response.original_vertices)
-                    {
-                        *v += *g * emission - *r;
-                    }
+                    superpose(
+                        &mut values,
+                        &response.unit_vertices,
+                        &response.original_vertices,
+                        emission,
+                    );
                 }
                 values
             }
@@ -469,7 +468,8 @@ impl Session {
                 })
                 .collect()
         };
-        let unit = self.solve_for(&mask(&|_| Rgb::ONE), None, &no_progress);
+        let unit_emission = mask(&|_| Rgb::ONE);
+        let unit = self.solve_for(&unit_emission, None, &no_progress);
         let original_emission = mask(&|i| self.emission[i]);
         let (mut iterations, mut residual) = (unit.iterations, unit.residual);
         // Uniform original emission needs no second solve: its response is e * G.
@@ -483,7 +483,7 @@ impl Session {
             .iter()
             .zip(&self.patch_objects)
             .all(|(e, o)| *o != object || *e == first);
-        let unit_vertices = self.linear_vertices(&unit.radiosity, &mask(&|_| Rgb::ONE));
+        let unit_vertices = self.linear_vertices(&unit.radiosity, &unit_emission);
         let (original, original_vertices) = if uniform {
             (
                 unit.radiosity.iter().map(|g| *g * first).collect(),
@@ -542,13 +542,7 @@ impl Session {
             for (object, emission) in edited {
                 let response = &self.responses[&object];
                 residual = worse(residual, response.residual);
-                for ((b, g), r) in radiosity
-                    .iter_mut()
-                    .zip(&response.unit)
-                    .zip(&response.original)
-                {
-                    *b += *g * emission - *r;
-                }
+                superpose(&mut radiosity, &response.unit, &response.original, emission);
             }
             // Clamp round-off below zero, as the solver does.
             radiosity.iter_mut().for_each(|b| *b = b.max(Rgb::ZERO));
@@ -609,6 +603,14 @@ impl Session {
                 .collect(),
             hierarchy: self.hierarchy_stats(),
         }
+    }
+}
+
+/// `values += emission * unit - original`: one object's response moved from its original
+/// emission to `emission` (per patch or per vertex).
+fn superpose(values: &mut [Rgb], unit: &[Rgb], original: &[Rgb], emission: Rgb) {
+    for ((v, g), r) in values.iter_mut().zip(unit).zip(original) {
+        *v += *g * emission - *r;
     }
 }
 
