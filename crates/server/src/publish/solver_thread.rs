@@ -268,16 +268,18 @@ fn apply(
             Err(error) => refused.push(format!("the move of '{object}' was refused: {error}")),
         }
     }
+    // The moved scene from the current answer, then its new geometry for viewers.
+    let moved_report = moved.then(|| session.solve(&solver::no_progress));
     if moved {
-        // The moved scene from the current answer, then its new geometry for viewers.
-        session.solve(&solver::no_progress);
         shared
             .hub
             .replace_geometry(geometry_of(session.scene(), session.mesh()));
     }
+    let mut emitted = false;
     for (object, emission) in &batch.emissions {
         match session.set_emission(object, Rgb::from(*emission)) {
             Ok(()) => {
+                emitted = true;
                 let mut emissions = shared.emissions.lock().expect("emissions lock");
                 if let Some(entry) = emissions.iter_mut().find(|(name, _)| name == object) {
                     entry.1 = *emission;
@@ -286,7 +288,11 @@ fn apply(
             Err(error) => refused.push(format!("the emission of '{object}' was refused: {error}")),
         }
     }
-    let report = session.solve(&solver::no_progress);
+    // A batch of moves alone is solved already; emissions are summed onto it.
+    let report = match moved_report {
+        Some(report) if !emitted => report,
+        _ => session.solve(&solver::no_progress),
+    };
     let vertex_radiosity = finite(to_f32(&session.vertex_radiosity()))?;
     report_convergence(shared, &report);
     *shared.report.lock().expect("report lock") = Some(report_for_viewers(&report));
