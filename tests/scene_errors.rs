@@ -1,6 +1,6 @@
 //! Bad scene files give errors that name the file, the line and what is wrong.
 
-use solver::{Scene, SceneError};
+use solver::{MAX_REFLECTANCE, Scene, SceneError};
 use std::path::{Path, PathBuf};
 
 const MTL: &str = "newmtl white\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n";
@@ -125,12 +125,12 @@ fn non_finite_coordinates_name_their_line() {
 fn reflectance_outside_zero_to_one_and_negative_emission_are_refused() {
     for (material, reason) in [
         (
-            "Kd 1 0.5 0.5",
-            "Kd [1.0, 0.5, 0.5] must have every channel in [0, 1)",
+            "Kd 1.5 0.5 0.5",
+            "Kd [1.5, 0.5, 0.5] must have every channel in [0, 1] (1 is read as 0.99)",
         ),
         (
             "Kd -0.1 0.5 0.5",
-            "Kd [-0.10000000149011612, 0.5, 0.5] must have every channel in [0, 1)",
+            "Kd [-0.10000000149011612, 0.5, 0.5] must have every channel in [0, 1] (1 is read as 0.99)",
         ),
         (
             "Kd 0.5 0.5 0.5\nKe 1 -2 1",
@@ -154,6 +154,52 @@ fn reflectance_outside_zero_to_one_and_negative_emission_are_refused() {
             )
         );
     }
+}
+
+#[test]
+fn a_kd_of_one_as_exported_assets_have_it_is_read_as_the_highest_reflectance_and_said() {
+    let obj = format!("mtllib scene.mtl\no a\nusemtl white\n{SQUARE}f 1 2 3 4\n");
+    let (scene, path, _folder) = load(&obj, Some("newmtl white\nKd 1 0.995 0.5\n"));
+    let scene = scene.expect("loads");
+    assert_eq!(
+        scene.faces[0].reflectance.to_array(),
+        [MAX_REFLECTANCE, MAX_REFLECTANCE, 0.5]
+    );
+    assert_eq!(
+        scene.load_warnings,
+        [format!(
+            "{}: material 'white': Kd [1.0, 0.9950000047683716, 0.5] read as [0.99, 0.99, 0.5] (at most 0.99)",
+            path.with_extension("mtl").display()
+        )]
+    );
+}
+
+#[test]
+fn a_texture_file_that_is_not_there_leaves_kd_alone_and_is_said() {
+    // Exporters write the path on the author's machine.
+    let obj = format!("mtllib scene.mtl\no a\nusemtl wood\n{SQUARE}f 1 2 3 4\n");
+    let (scene, path, _folder) = load(
+        &obj,
+        Some("newmtl wood\nKd 0.5 0.4 0.3\nmap_Kd C:/Users/someone/Desktop/oak.jpg\n"),
+    );
+    let scene = scene.expect("loads");
+    assert_eq!(
+        scene.faces[0].reflectance.to_array(),
+        [0.5, 0.4, 0.3].map(|c: f32| c as f64)
+    );
+    assert!(scene.textures.is_empty() && scene.faces[0].texture.is_none());
+    let mtl = path.with_extension("mtl");
+    assert_eq!(
+        scene.load_warnings,
+        [format!(
+            "{}: material 'wood': map_Kd {} is not there: Kd alone is used",
+            mtl.display(),
+            mtl.parent()
+                .unwrap()
+                .join("C:/Users/someone/Desktop/oak.jpg")
+                .display()
+        )]
+    );
 }
 
 #[test]

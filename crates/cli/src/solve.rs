@@ -53,6 +53,9 @@ impl SolveCommand {
             )
         });
         let report = &solved.report;
+        for warning in &report.warnings {
+            eprintln!("warning: {warning}");
+        }
         if report.skipped_faces > 0 {
             eprintln!(
                 "warning: {}: skipped {} zero-area faces",

@@ -36,15 +36,14 @@ pub use form_factors::{DenseFormFactors, UpdateStats};
 pub use geometry::Polygon;
 pub use hierarchy::{HierarchySettings, HierarchyStats};
 pub use input::{
-    MAX_REFLECTANCE, MAX_SCENE_FILE_BYTES, SceneError, load_gltf, load_obj, load_scene,
-    read_scene_file,
+    MAX_SCENE_FILE_BYTES, SceneError, load_gltf, load_obj, load_scene, read_scene_file,
 };
 pub use mesh::{Mesh, Patch, PatchTarget};
 pub use pair::FormFactorSettings;
 pub use scene::texture::{Texture, TextureMap};
 pub use scene::{
-    Face, MAX_COORDINATE, MAX_EMISSION, MAX_TEXTURE_COORDINATE, Material, Rgb, Scene, SceneObject,
-    View, check_emission, check_translation,
+    Face, MAX_COORDINATE, MAX_EMISSION, MAX_REFLECTANCE, MAX_TEXTURE_COORDINATE, Material, Rgb,
+    Scene, SceneObject, View, check_emission, check_translation,
 };
 pub use solution::pipeline::{Solved, solve_file, solve_mesh, solve_scene};
 pub use solution::report::{ObjectRadiosity, SolveReport, StageSeconds};

@@ -34,6 +34,10 @@ pub struct SolveReport {
     pub triangles: usize,
     /// Input faces dropped for zero area.
     pub skipped_faces: usize,
+    /// What loading changed to solve the scene file as shipped, each naming the material or
+    /// file: a `Kd` of 1 read as 0.99, a texture file that is not there (absent when nothing).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
     /// The method: `jacobi`, `gauss-seidel`, `progressive`, `gmres` or `hierarchical`.
     pub method: String,
     /// Solver iterations.

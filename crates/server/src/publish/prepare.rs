@@ -30,6 +30,9 @@ pub struct Prepared {
 /// viewers see one patch per input face, then a geometry change to the leaves.
 pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepared> {
     let scene = solver::load_scene(scene_path)?;
+    for warning in &scene.load_warnings {
+        tracing::warn!("{warning}");
+    }
     let digest = crate::publish::cache::scene_digest(&scene, &request);
     let scene_id = crate::publish::cache::scene_id(&digest);
     let mesh = solver::starting_mesh(&scene, &request)?;

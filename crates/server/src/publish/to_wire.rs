@@ -84,6 +84,7 @@ pub fn report_for_viewers(report: &solver::SolveReport) -> SolveReport {
         patches: report.patches,
         triangles: report.triangles,
         skipped_faces: report.skipped_faces,
+        warnings: report.warnings.clone(),
         method: report.method.clone(),
         iterations: report.iterations,
         residual: report.residual,

@@ -19,14 +19,10 @@
 
 use super::{SceneError, check_scene_file};
 use crate::scene::texture::{Texture, mean, srgb_to_linear};
-use crate::scene::{MAX_COORDINATE, MAX_TEXTURE_COORDINATE, Material, Rgb, Scene};
+use crate::scene::{MAX_COORDINATE, MAX_REFLECTANCE, MAX_TEXTURE_COORDINATE, Material, Rgb, Scene};
 use glam::{DMat4, DVec3};
 use std::collections::HashMap;
 use std::path::Path;
-
-/// The largest reflectance a base colour gives: radiosity needs ρ < 1, and glTF's default base
-/// colour is 1 (a closed room of it would never converge).
-pub const MAX_REFLECTANCE: f64 = 0.99;
 
 /// Loads the glTF file at `path`.
 pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {

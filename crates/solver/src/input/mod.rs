@@ -10,7 +10,7 @@ mod obj;
 use crate::scene::Scene;
 use std::path::{Path, PathBuf};
 
-pub use self::gltf::{MAX_REFLECTANCE, load_gltf};
+pub use self::gltf::load_gltf;
 pub use obj::load_obj;
 
 /// Why a scene could not be loaded. Every variant names the file and, where one exists, the line.

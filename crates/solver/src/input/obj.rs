@@ -3,7 +3,10 @@
 
 use super::{SceneError, read_scene_file};
 use crate::scene::texture::Texture;
-use crate::scene::{MAX_COORDINATE, MAX_TEXTURE_COORDINATE, Material, Rgb, Scene, View};
+use crate::scene::{
+    MAX_COORDINATE, MAX_REFLECTANCE, MAX_TEXTURE_COORDINATE, Material, Rgb, Scene, View,
+    clamp_reflectance,
+};
 use glam::DVec3;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -16,10 +19,11 @@ pub fn load_obj(path: &Path) -> Result<Scene, SceneError> {
     let mtl_path = first_mtllib(&text)
         .map(|m| folder.join(m))
         .unwrap_or_else(|| path.into());
-    let (checked, textures) = radiosity_materials(&mtl_path, &materials)?;
+    let (checked, textures, load_warnings) = radiosity_materials(&mtl_path, &materials)?;
     let mut scene = Scene {
         view: find_view(path, &text)?,
         textures,
+        load_warnings,
         ..Scene::default()
     };
     let mut object_ids: HashMap<String, u32> = HashMap::new();
@@ -93,13 +97,16 @@ fn parse(path: &Path, text: &str) -> Result<(Vec<tobj::Model>, Vec<tobj::Materia
 /// A material and the index of its `map_Kd` texture, if it has one.
 type TexturedMaterial = (Material, Option<u32>);
 
-/// Each MTL material as radiosity takes it (with the index of its `map_Kd` texture), and the
-/// textures they name, each loaded once.
+/// Each MTL material as radiosity takes it (with the index of its `map_Kd` texture), the
+/// textures they name, each loaded once, and what was changed to take them as shipped: a `Kd`
+/// of 1 read as [`MAX_REFLECTANCE`], a `map_Kd` file that is not there left out (exporters
+/// write the absolute path of the author's machine).
 fn radiosity_materials(
     mtl_path: &Path,
     materials: &[tobj::Material],
-) -> Result<(Vec<TexturedMaterial>, Vec<Texture>), SceneError> {
+) -> Result<(Vec<TexturedMaterial>, Vec<Texture>, Vec<String>), SceneError> {
     let mut textures: Vec<(PathBuf, Texture)> = Vec::new();
+    let mut warnings = Vec::new();
     let checked = materials
         .iter()
         .map(|m| {
@@ -115,20 +122,41 @@ fn radiosity_materials(
             {
                 Some(name) => {
                     let file = mtl_path.parent().unwrap_or(Path::new(".")).join(name);
-                    let index = match textures.iter().position(|(path, _)| *path == file) {
-                        Some(index) => index,
+                    match textures.iter().position(|(path, _)| *path == file) {
+                        Some(index) => Some(index as u32),
+                        None if !file.exists() => {
+                            warnings.push(format!(
+                                "{}: material '{}': map_Kd {} is not there: Kd alone is used",
+                                mtl_path.display(),
+                                m.name,
+                                file.display()
+                            ));
+                            None
+                        }
                         None => {
                             textures.push((file.clone(), super::image::load_texture(&file)?));
-                            textures.len() - 1
+                            Some(textures.len() as u32 - 1)
                         }
-                    };
-                    Some(index as u32)
+                    }
                 }
                 None => None,
             };
             let reflectance = match texture {
                 Some(index) => rgb(m.diffuse, Rgb::ONE) * textures[index as usize].1.mean,
                 None => rgb(m.diffuse, Rgb::ZERO),
+            };
+            let reflectance = match clamp_reflectance(reflectance) {
+                Some(clamped) => {
+                    warnings.push(format!(
+                        "{}: material '{}': Kd {:?} read as {:?} (at most {MAX_REFLECTANCE})",
+                        mtl_path.display(),
+                        m.name,
+                        reflectance.to_array(),
+                        clamped.to_array()
+                    ));
+                    clamped
+                }
+                None => reflectance,
             };
             let material = Material {
                 reflectance,
@@ -147,6 +175,7 @@ fn radiosity_materials(
     Ok((
         checked,
         textures.into_iter().map(|(_, texture)| texture).collect(),
+        warnings,
     ))
 }
 

@@ -68,6 +68,9 @@ pub struct Scene {
     pub triangles_before_cuts: usize,
     /// The textures faces refer to ([`Face::texture`]); empty for an untextured scene.
     pub textures: Vec<Texture>,
+    /// What loading changed so that the file as shipped could be solved, each naming the
+    /// material or file (a `Kd` of 1 clamped, a texture file that is not there).
+    pub load_warnings: Vec<String>,
 }
 
 /// A material's physical values.
@@ -84,10 +87,29 @@ impl Material {
     pub fn validate(&self) -> Result<(), String> {
         let r = self.reflectance.to_array();
         if !r.iter().all(|c| c.is_finite() && (0.0..1.0).contains(c)) {
-            return Err(format!("Kd {r:?} must have every channel in [0, 1)"));
+            return Err(format!(
+                "Kd {r:?} must have every channel in [0, 1] (1 is read as {MAX_REFLECTANCE})"
+            ));
         }
         check_emission(self.emission.to_array()).map_err(|rule| format!("Ke {rule}"))
     }
+}
+
+/// The highest reflectance solved: a file's `Kd` (or glTF base colour) of 1, common in exported
+/// assets ("white, let the texture decide"), is read as this, said in
+/// [`Scene::load_warnings`]. No diffuse surface reflects all the light it gets (Spectralon, the
+/// whitest made, 0.99), and at 1 a closed room has no solution.
+pub const MAX_REFLECTANCE: f64 = 0.99;
+
+/// Clamps a reflectance of at most 1 to [`MAX_REFLECTANCE`]; `None` when no channel needed it.
+/// Values past 1 are left for [`Material::validate`] to refuse.
+pub fn clamp_reflectance(reflectance: Rgb) -> Option<Rgb> {
+    let r = reflectance.to_array();
+    let clamped = r.map(|c| match c > MAX_REFLECTANCE && c <= 1.0 {
+        true => MAX_REFLECTANCE,
+        false => c,
+    });
+    (clamped != r).then(|| Rgb::from(clamped))
 }
 
 /// The brightest emission accepted, W/m^2. Frames hold radiosity up to about 8e34 W/m^2

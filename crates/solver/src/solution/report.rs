@@ -39,6 +39,9 @@ pub struct SolveReport {
     pub triangles: usize,
     /// Input faces dropped for zero area.
     pub skipped_faces: usize,
+    /// What loading changed to solve the file as shipped ([`crate::Scene::load_warnings`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
     /// The solver method.
     pub method: String,
     /// Iterations the solver ran.

@@ -573,6 +573,7 @@ impl Session {
             patches: self.radiosity.len(),
             triangles: self.triangles,
             skipped_faces: self.skipped_faces,
+            warnings: self.scene.load_warnings.clone(),
             method: if self.request.hierarchy.is_some() {
                 "hierarchical".into()
             } else {
