@@ -255,18 +255,15 @@ fn a_leaf_budget_coarsens_the_knob_and_says_so() {
         (Some(0.1), Some(false))
     );
     assert!(!quiet.contains("warning"), "{quiet}");
-    // Half the leaves the knob wants: the whole refinement runs again at 0.2, within budget.
+    // Half the leaves the knob wants: refinement goes on at a doubled knob (0.2, or coarser
+    // for what the generations before spent at 0.1) where it would pass them.
     let budget = free["elements"].as_u64().unwrap() / 2;
     let (bounded, warned) = solve("0.1", &["--max-leaves", &budget.to_string()]);
-    assert_eq!(
-        (
-            bounded["knob_used"].as_f64(),
-            bounded["leaf_budget_reached"].as_bool()
-        ),
-        (Some(0.2), Some(false))
-    );
+    let knob = bounded["knob_used"].as_f64().unwrap();
+    assert!([0.2, 0.4].contains(&knob), "{knob}");
+    assert_eq!(bounded["leaf_budget_reached"].as_bool(), Some(false));
     assert!(bounded["elements"].as_u64().unwrap() <= budget);
-    assert!(warned.contains(&format!("warning: --error 0.1 needs more than --max-leaves {budget} leaves or --max-links 10000000 links here; refined at --error 0.2 instead")), "{warned}");
+    assert!(warned.contains(&format!("warning: --error 0.1 needs more than --max-leaves {budget} leaves or --max-links 10000000 links here; refinement went on at --error {knob} where it would have passed them")), "{warned}");
     // Past a knob of 0.5 there is nothing coarser to try: elements stop splitting at the budget.
     let (frozen, warned) = solve("0.6", &["--max-leaves", "60"]);
     assert_eq!(

@@ -152,7 +152,7 @@ pub fn budget_warnings(asked: &HierarchySettings, stats: &HierarchyStats) -> Vec
     let mut warnings = Vec::new();
     if stats.knob_used > asked.error {
         warnings.push(format!(
-            "--error {} needs more than --max-leaves {} leaves or --max-links {} links here; refined at --error {} instead",
+            "--error {} needs more than --max-leaves {} leaves or --max-links {} links here; refinement went on at --error {} where it would have passed them",
             asked.error, asked.max_leaves, asked.max_links, stats.knob_used
         ));
     }

@@ -89,9 +89,10 @@ pub enum Progress<'a> {
         /// Pairs the next generation decides.
         undecided: usize,
     },
-    /// A budget stopped refinement at `knob`; it starts again at `next_knob`.
+    /// A generation of refinement at `knob` would pass a budget: it is decided again, and
+    /// refinement goes on, at `next_knob`.
     Coarsening {
-        /// The knob abandoned.
+        /// The knob the generation was first decided at.
         knob: f64,
         /// The knob tried next.
         next_knob: f64,
@@ -156,7 +157,7 @@ impl Progress<'_> {
                 next_knob,
                 limit,
             } => {
-                format!("refinement at error {knob} passed {limit}: starting again at {next_knob}")
+                format!("refinement at error {knob} would pass {limit}: going on at {next_knob}")
             }
             Progress::Warning { text } => text.to_string(),
             Progress::Estimate { .. } => return None,

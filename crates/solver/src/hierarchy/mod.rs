@@ -15,7 +15,9 @@
 //!   the receiver, kernel and visibility both (a bound, for a cluster), so partial occlusion
 //!   refines while full visibility and full occlusion do not. Between elements the receiver
 //!   splits for `dF` and the source for `dB_S`; with a cluster, the larger end splits.
-//!   Refinement runs again on each new solution until no link changes.
+//!   Refinement runs again on each new solution until no link changes. It is one pass: a
+//!   generation of decisions that would pass a budget is decided again at twice the knob and
+//!   refinement goes on from there, keeping what is refined (no attempt is thrown away).
 //! - **Visibility**: a shaft between the two elements (Haines, Wallace 1994, "Shaft Culling for
 //!   Efficient Ray-Cast Radiosity") collects the faces that can block. None: clear, no rays. One
 //!   face that separates the two and covers every segment between them: hidden, no rays. Else
@@ -53,7 +55,7 @@ use crate::visibility::Occluders;
 use operator::{Incoming, Slope};
 use rayon::prelude::*;
 use reach::Reach;
-use refine::{Attempt, Budget, Fineness, Overflow, Pass};
+use refine::{Budget, Fineness, Pass};
 use tree::Tree;
 
 /// The one accuracy knob of the hierarchical path, and the budget that bounds its memory.
@@ -66,16 +68,18 @@ pub struct HierarchySettings {
     pub error: f64,
     /// Refinement-and-solve rounds at most (each refines on the newest solution).
     pub max_rounds: usize,
-    /// Leaves at most. A refinement that would pass it starts again at twice the knob (reported
-    /// as [`HierarchyStats::knob_used`]); past a knob of 0.5, elements stop splitting instead
-    /// ([`HierarchyStats::leaf_budget_reached`]). A leaf costs about 2.3 KB with the ten or so
-    /// links a room scene gives it, so the default stays near 1.2 GB.
+    /// Leaves at most. A generation of link decisions that would pass it is decided again at
+    /// twice the knob, and refinement goes on at that knob (the last one is reported as
+    /// [`HierarchyStats::knob_used`]); past a knob of 0.5, elements stop splitting instead
+    /// ([`HierarchyStats::leaf_budget_reached`]). It also sets the smallest element
+    /// ([`refine::finest_radius`]). A leaf costs about 2.3 KB with the ten or so links a room
+    /// scene gives it, so the default stays near 1.2 GB.
     pub max_leaves: usize,
     /// Links at most, about: the bound on memory where links per leaf run high (a model of many
-    /// small faces made 85 a leaf, 4.1 GB at 354k leaves). Passing it restarts at twice the
-    /// knob like the leaves; past 0.5 no pair splits further
-    /// ([`HierarchyStats::link_budget_reached`]), so the last generation of pairs may add to it.
-    /// About 250 bytes a link, all told (docs/BENCHMARKS.md).
+    /// small faces made 85 a leaf, 4.1 GB at 354k leaves). Passing it coarsens the knob like the
+    /// leaves; past 0.5 no pair splits further ([`HierarchyStats::link_budget_reached`]), so the
+    /// last generation of pairs may add to it. About 250 bytes a link, all told
+    /// (docs/BENCHMARKS.md).
     pub max_links: usize,
 }
 
@@ -131,8 +135,9 @@ pub struct HierarchyStats {
     pub rays: u64,
     /// Solver iterations spent in the rounds before the final solve.
     pub refinement_iterations: usize,
-    /// The error knob the hierarchy was refined to: the one asked for, or a coarser one when
-    /// that would have passed [`HierarchySettings::max_leaves`].
+    /// The error knob refinement ended at: the one asked for, or the coarser one it went on
+    /// at when a generation would have passed a budget (the generations before it were
+    /// decided at the finer knobs).
     pub knob_used: f64,
     /// Whether elements stopped splitting at [`HierarchySettings::max_leaves`] even at the
     /// coarsest knob tried, leaving some links coarser than it asks.
@@ -268,33 +273,13 @@ impl Hierarchy {
             progress,
             max_rounds: settings.max_rounds,
             estimate: ambient_estimate(scene),
+            finest_radius: refine::finest_radius(receiving_area(scene), settings.max_leaves),
         };
-        let mut knob = settings.error;
-        loop {
-            // Over a budget, the whole refinement again at twice the knob: stopping one
-            // part-way leaves whichever elements came first fine and the rest coarse (the
-            // furnished room at knob 0.03 stopped so ran 17% RMS; refined at 0.2 it runs 9%).
-            // Past 0.5 there is nothing coarser to try, and elements stop splitting instead.
-            let budget = Budget {
-                max_leaves: settings.max_leaves,
-                max_links: settings.max_links,
-                overflow: if 2.0 * knob < 1.0 {
-                    Overflow::Abandon
-                } else {
-                    Overflow::Freeze
-                },
-            };
-            let limit = match run.refine(unrefined.clone(), knob, budget)? {
-                Attempt::Done(built) => return Ok(built),
-                Attempt::Abandoned(limit) => limit,
-            };
-            progress(Progress::Coarsening {
-                knob,
-                next_knob: 2.0 * knob,
-                limit,
-            });
-            knob *= 2.0;
-        }
+        let budget = Budget {
+            max_leaves: settings.max_leaves,
+            max_links: settings.max_links,
+        };
+        run.refine(unrefined, settings.error, budget)
     }
 }
 
@@ -315,19 +300,20 @@ struct Rounds<'a> {
     max_rounds: usize,
     /// The ambient radiosity of the first estimate ([`ambient_estimate`]).
     estimate: Rgb,
+    /// The smallest element radius the leaf budget affords ([`refine::finest_radius`]).
+    finest_radius: f64,
 }
 
 impl Rounds<'_> {
-    /// Refines `hierarchy` (unrefined, indexed) at error `knob`: first on the ambient estimate,
-    /// then on each new solution until no link needs refining or the rounds run out; or the
-    /// budget that abandoned the attempt.
+    /// Refines `hierarchy` (unrefined, indexed) at error `knob`, coarser where `budget` asks
+    /// for it: first on the ambient estimate, then on each new solution until no link needs
+    /// refining or the rounds run out.
     fn refine(
         &self,
         mut hierarchy: Hierarchy,
-        knob: f64,
+        mut knob: f64,
         budget: Budget,
-    ) -> Result<Attempt<BuiltHierarchy>, NeedsEntries> {
-        let smallest = MIN_RADIUS_PER_ERROR * knob;
+    ) -> Result<BuiltHierarchy, NeedsEntries> {
         let mut radiosity: Vec<Rgb> = (0..hierarchy.tree.leaves.len())
             .map(|i| {
                 let patch = hierarchy.tree.leaf_patch(i);
@@ -340,6 +326,10 @@ impl Rounds<'_> {
             vec![(0, 0)]
         };
         for round in 0..self.max_rounds.max(1) {
+            // Past the link budget no pair splits: another round could change no link.
+            if round > 0 && hierarchy.stats.link_budget_reached {
+                break;
+            }
             if round > 0 {
                 let solved = hierarchy.solve(
                     &hierarchy.leaf_emission(),
@@ -351,9 +341,10 @@ impl Rounds<'_> {
                 radiosity = solved.radiosity;
             }
             let sources = hierarchy.node_radiosity(&radiosity);
-            let target = Fineness {
+            let mut target = Fineness {
                 tolerance: knob * hierarchy.reach.mean_reflected(&hierarchy.tree, &radiosity),
-                smallest,
+                smallest: MIN_RADIUS_PER_ERROR * knob,
+                finest_radius: self.finest_radius,
             };
             if round > 0 {
                 pending = hierarchy.take_links_to_redo(&sources, &target);
@@ -362,32 +353,43 @@ impl Rounds<'_> {
                 }
             }
             let (before, inherited) = (hierarchy.tree.nodes.len(), hierarchy.pull(&radiosity));
-            let refinement = hierarchy.refine(
+            let mut pass = Pass {
+                budget,
+                knob,
+                round,
+                leaves: hierarchy.tree.leaves.len(),
+                last_overshoot: None,
+                progress: self.progress,
+            };
+            hierarchy.refine(
                 sources,
-                &target,
+                &mut target,
                 self.occluders,
                 self.rays,
                 std::mem::take(&mut pending),
-                Pass {
-                    budget,
-                    knob,
-                    round,
-                    progress: self.progress,
-                },
+                &mut pass,
             );
+            knob = pass.knob;
             hierarchy.stats.rounds = round + 1;
-            if let Attempt::Abandoned(limit) = refinement {
-                return Ok(Attempt::Abandoned(limit));
-            }
             hierarchy.index(self.occluders);
             radiosity = hierarchy.inherit(inherited, before);
         }
         hierarchy.stats.knob_used = knob;
-        Ok(Attempt::Done(BuiltHierarchy {
+        Ok(BuiltHierarchy {
             hierarchy,
             radiosity,
-        }))
+        })
     }
+}
+
+/// The area of the faces that reflect light, scene units squared.
+fn receiving_area(scene: &Scene) -> f64 {
+    scene
+        .faces
+        .iter()
+        .filter(|f| f.reflectance.max_element() > 0.0)
+        .map(|f| f.polygon.area())
+        .sum()
 }
 
 /// The first estimate's ambient radiosity (Cohen, Chen, Wallace, Greenberg 1988): the emitted
@@ -442,25 +444,26 @@ mod tests {
         (stats, lines.into_inner().unwrap())
     }
 
-    /// The progress lines that restart refinement at a coarser knob.
-    fn restarts(lines: &[String]) -> Vec<String> {
+    /// The progress lines that coarsen the knob.
+    fn coarsenings(lines: &[String]) -> Vec<String> {
         lines
             .iter()
-            .filter(|l| l.contains("starting again"))
+            .filter(|l| l.contains("going on at"))
             .cloned()
             .collect()
     }
 
-    /// What the restarts from 0.1 to 0.8 say when `limit` forces each.
-    fn said_restarts(limit: &str) -> Vec<String> {
-        [0.1, 0.2, 0.4]
-            .map(|k| {
-                format!(
-                    "refinement at error {k} passed {limit}: starting again at {}",
-                    2.0 * k
-                )
+    /// What coarsening from `from` to each of `to` in turn says when `limit` forces it.
+    fn said_coarsenings(limit: &str, from: f64, to: &[f64]) -> Vec<String> {
+        let mut knob = from;
+        to.iter()
+            .map(|&next| {
+                let line =
+                    format!("refinement at error {knob} would pass {limit}: going on at {next}");
+                knob = next;
+                line
             })
-            .to_vec()
+            .collect()
     }
 
     #[test]
@@ -484,14 +487,18 @@ mod tests {
 
     #[test]
     fn a_tight_leaf_budget_doubles_the_knob_until_the_leaves_fit() {
-        // Six faces and room for no split: 0.1, 0.2 and 0.4 split and are abandoned (a wall's
-        // factor to its neighbour runs from near 0 at the far edge to 1/2 along the shared
-        // one); at 0.8 the unsplit faces carry every link within the knob. (Freezing when a
-        // split is still asked for is checked on the Cornell box by the `radcast` tests.)
+        // Six faces and room for no split: 0.1 and 0.2 split every face (a wall's factor to
+        // its neighbour runs from near 0 at the far edge to 1/2 along the shared one), so
+        // doubling did not help and the next step goes to the coarsest knob at once; at 0.8
+        // the unsplit faces carry every link within the knob. (Freezing when a split is still
+        // asked for is checked on the Cornell box by the `radcast` tests.)
         let (stats, lines) = build_with(&closed_cube(), 0.1, 6);
         assert_eq!(stats.knob_used, 0.8);
-        // Each restart is said when it happens, not only at the end.
-        assert_eq!(restarts(&lines), said_restarts("6 leaves (--max-leaves)"));
+        // Each coarsening is said when it happens, not only at the end.
+        assert_eq!(
+            coarsenings(&lines),
+            said_coarsenings("6 leaves (--max-leaves)", 0.1, &[0.2, 0.8])
+        );
         assert!(!stats.leaf_budget_reached);
         assert_eq!(stats.elements, 6);
         assert!(stats.links > 0);
@@ -510,11 +517,15 @@ mod tests {
             },
         );
         assert_eq!(
-            restarts(&lines),
-            said_restarts(&format!("{max_links} links (--max-links)"))
+            coarsenings(&lines),
+            said_coarsenings(
+                &format!("{max_links} links (--max-links)"),
+                0.1,
+                &[0.2, 0.8]
+            )
         );
-        // An attempt stops inside the generation that passes the budget: no generation
-        // finishes with more links and pairs still to decide than the budget.
+        // A generation that would pass the budget is decided again, coarser: none finishes
+        // with more links and pairs still to decide than the budget.
         for line in lines.iter().filter(|l| l.starts_with("refining")) {
             let words: Vec<&str> = line.split(' ').collect();
             let before = |word: &str| -> usize {
@@ -523,8 +534,10 @@ mod tests {
             };
             assert!(before("links") + before("pairs") <= max_links, "{line}");
         }
-        // At 0.8 the six faces link to each other unsplit.
-        assert_eq!((stats.knob_used, stats.links), (0.8, 30));
+        // What the first generations split at 0.1 stays (nothing starts again); from 0.8 on
+        // the rest fits the budget with no pair split past it.
+        assert_eq!(stats.knob_used, 0.8);
+        assert!(stats.links <= max_links, "{} links", stats.links);
         assert!(!stats.link_budget_reached);
         // From 0.5 on nothing coarser is tried: pairs stop splitting, each kept as it is.
         let room = super::fixtures::room_with_a_box();

@@ -46,47 +46,103 @@ impl NodeRadiosity {
 }
 
 /// How fine refinement goes.
+#[derive(Clone, Copy)]
 pub(super) struct Fineness {
     /// Largest radiosity error a link may carry, W/m^2.
     pub(super) tolerance: f64,
     /// Smallest element radius, as a fraction of its size scale.
     pub(super) smallest: f64,
+    /// Smallest element radius, scene units, whatever the size scale ([`finest_radius`]).
+    pub(super) finest_radius: f64,
 }
 
-/// The most leaves and links refinement may make, and what it does when it would pass them.
+impl Fineness {
+    /// Whether node `n` may split: a cluster always, an element above the smallest size.
+    fn can_split(&self, n: &Node) -> bool {
+        n.element.as_ref().is_none_or(|e| {
+            element_size(n) > (self.smallest * e.size_scale).max(self.finest_radius)
+                && e.depth < MAX_DEPTH
+        })
+    }
+
+    /// The same, with no element split once the leaf budget is `frozen`.
+    fn frozen_if(self, frozen: bool) -> Fineness {
+        Fineness {
+            smallest: if frozen { f64::INFINITY } else { self.smallest },
+            ..self
+        }
+    }
+}
+
+/// An element's size as refinement measures it: its bounding radius, or that of the equilateral
+/// triangle of its area where that is smaller, `sqrt(4 A / (3 sqrt 3))`. The same for squares
+/// and well-shaped triangles; a sliver counts as small as its area. Its children are slivers
+/// too (a triangle splits into four like it), so by its length alone a 4 m x 15 cm strip of a
+/// real model split into 1,024 leaves of 4 cm, and such faces made most of its 490k leaves.
+fn element_size(n: &Node) -> f64 {
+    n.radius.min((4.0 * n.area / (3.0 * 3.0f64.sqrt())).sqrt())
+}
+
+/// The smallest element radius a leaf budget affords everywhere: that of a disc of the
+/// receiving area's share per leaf, `sqrt(A / (pi max_leaves))`. Finer elements can only be
+/// afforded in a small part of the scene, and on models of many small faces the size scale
+/// (the median face) is centimetres under a ground of hundreds of metres: refined to it, the
+/// shadow of a building on the ground alone passed the leaf budget at every knob.
+pub(super) fn finest_radius(receiving_area: f64, max_leaves: usize) -> f64 {
+    (receiving_area / (std::f64::consts::PI * max_leaves.max(1) as f64)).sqrt()
+}
+
+/// The most leaves and links refinement may make.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Budget {
     pub(super) max_leaves: usize,
     pub(super) max_links: usize,
-    pub(super) overflow: Overflow,
 }
 
-/// One refinement pass: its leaf budget, and where its progress goes after each generation of
-/// link decisions ([`Progress::Refining`], tagged with the knob and round).
-#[derive(Clone, Copy)]
+/// One refinement pass: its budget, the knob it refines at (coarsened when a generation would
+/// pass the budget), and where its progress goes after each generation of link decisions
+/// ([`Progress::Refining`], tagged with the knob and round).
 pub(super) struct Pass<'a> {
     pub(super) budget: Budget,
     pub(super) knob: f64,
     pub(super) round: usize,
+    /// Leaves so far: the tree's, and those the generations decided since add.
+    pub(super) leaves: usize,
+    /// How far over the budget the last generation decided again would have gone (the ratio
+    /// of what it would make to what is allowed), if one was.
+    pub(super) last_overshoot: Option<f64>,
     pub(super) progress: &'a (dyn Fn(Progress) + Sync),
 }
 
-/// What to do when a round of splits would pass a budget.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Overflow {
-    /// Stop at once: the caller starts again at a coarser knob.
-    Abandon,
-    /// Go on without element splits (leaves), or without any split (links).
-    Freeze,
-}
+impl Pass<'_> {
+    /// Whether a budget can still be met by coarsening: below a knob of 0.5 it doubles; from
+    /// there elements and then pairs stop splitting instead.
+    fn can_coarsen(&self) -> bool {
+        2.0 * self.knob < 1.0
+    }
 
-/// How an attempt at refining ended: done, with what it made, or abandoned at a budget.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Attempt<T> {
-    /// Every pending link was kept, dropped or split to the end.
-    Done(T),
-    /// A budget stopped it part-way ([`Overflow::Abandon`]).
-    Abandoned(Limit),
+    /// Doubles the knob, and `target` with it, saying why; to the coarsest knob at once when
+    /// the last doubling did not bring the generation's `overshoot` (what it would make over
+    /// what the budget allows) down by a tenth: what passes the budget then does not depend
+    /// on the knob, and each doubling would decide the generation again for nothing.
+    fn coarsen(&mut self, target: &mut Fineness, limit: Limit, overshoot: f64) {
+        let futile = self
+            .last_overshoot
+            .is_some_and(|last| overshoot > 0.9 * last);
+        self.last_overshoot = Some(overshoot);
+        let mut factor = 2.0;
+        while futile && 2.0 * factor * self.knob < 1.0 {
+            factor *= 2.0;
+        }
+        (self.progress)(Progress::Coarsening {
+            knob: self.knob,
+            next_knob: factor * self.knob,
+            limit,
+        });
+        self.knob *= factor;
+        target.tolerance *= factor;
+        target.smallest *= factor;
+    }
 }
 
 /// Read-only state for deciding links in parallel.
@@ -122,7 +178,7 @@ impl Decider<'_> {
             return Decision::Drop;
         }
         let errors = LinkErrors::new(r, self.sources.at(source), estimate.factor, estimate.spread);
-        match errors.end_to_split(r, s, self.target.tolerance, self.target.smallest) {
+        match errors.end_to_split(r, s, &self.target) {
             Some(End::Receiver) => return Decision::SplitReceiver,
             Some(End::Source) => return Decision::SplitSource,
             None => {}
@@ -161,106 +217,136 @@ const MIN_SLICE: usize = 1 << 14;
 
 impl Hierarchy {
     /// Links from `pending` pairs, refined until every kept one is accurate enough; the rays
-    /// and shaft decisions are added to the stats. Past the budget's leaves it marks the
-    /// budget reached and then stops or goes on without element splits, as `budget` says.
+    /// and shaft decisions are added to the stats. A generation of decisions that would pass
+    /// the budget is decided again at twice the knob (`run.knob`, `target`): what is already
+    /// refined stays, finer than the new knob asks, and nothing starts again. Where the knob
+    /// can no longer coarsen, elements stop splitting at the leaf budget and pairs at the link
+    /// budget (marked in the stats).
     pub(super) fn refine(
         &mut self,
         mut sources: NodeRadiosity,
-        target: &Fineness,
+        target: &mut Fineness,
         occluders: &Occluders,
         rays: FormFactorSettings,
         mut pending: Vec<(u32, u32)>,
-        run: Pass,
-    ) -> Attempt<()> {
-        let budget = run.budget;
-        let (mut leaves, mut rays_cast, mut shaft_decided) = (self.tree.leaves.len(), 0, 0);
+        run: &mut Pass,
+    ) {
         while !pending.is_empty() {
             // Links now plus pairs still to decide: what the links would be with no more splits.
-            if self.links.len() + pending.len() > budget.max_links {
-                if budget.overflow == Overflow::Abandon {
-                    return Attempt::Abandoned(Limit::Links(budget.max_links));
-                }
+            if self.links.len() + pending.len() > run.budget.max_links {
                 self.stats.link_budget_reached = true;
             }
-            // Past the link budget no pair splits: each is kept as it is (or dropped unseen).
-            let tolerance = match self.stats.link_budget_reached {
-                true => f64::INFINITY,
-                false => target.tolerance,
-            };
-            let mut decide = |pairs: &[(u32, u32)], frozen: bool| {
-                let refiner = Decider {
-                    factors: LinkFactors::new(self, occluders, rays),
-                    sources: &sources,
-                    target: Fineness {
-                        tolerance,
-                        smallest: smallest_while(frozen, target.smallest),
-                    },
-                };
-                let decisions: Vec<Decision> = pairs
-                    .par_iter()
-                    .map(|&(r, s)| refiner.decide(r, s))
-                    .collect();
-                let (cast, decided) = refiner.factors.into_counts();
-                rays_cast += cast;
-                shaft_decided += decided;
-                decisions
-            };
-            let frozen = self.stats.leaf_budget_reached;
-            // Decided a slice at a time, so that an attempt the link budget will abandon stops
-            // as soon as the links kept plus the pairs made so far pass it (what the check
-            // above would find after the whole generation: both only grow), instead of
-            // deciding the rest of a generation that is thrown away (on the 125k-triangle town,
-            // each abandoned attempt spent about half its time on its last generation).
-            let watch_links = budget.overflow == Overflow::Abandon;
-            let slice = if watch_links {
-                (pending.len() / GENERATION_SLICES).max(MIN_SLICE)
-            } else {
-                pending.len().max(1)
-            };
-            let mut decisions = Vec::with_capacity(pending.len());
-            let mut made = self.links.len();
-            for pairs in pending.chunks(slice) {
-                let decided = decide(pairs, frozen);
-                made += pairs
-                    .iter()
-                    .zip(&decided)
-                    .map(|(&(r, s), decision)| self.pairs_made(r, s, decision))
-                    .sum::<usize>();
-                decisions.extend(decided);
-                if watch_links && made > budget.max_links {
-                    return Attempt::Abandoned(Limit::Links(budget.max_links));
+            let decisions = loop {
+                match self.decide_generation(&pending, &sources, target, occluders, rays, run) {
+                    Ok((decisions, new_leaves)) => {
+                        run.leaves += new_leaves;
+                        break decisions;
+                    }
+                    Err((limit, overshoot)) => run.coarsen(target, limit, overshoot),
                 }
-            }
-            if !frozen {
-                let (splits, new_leaves) = self.element_splits(&pending, &decisions);
-                if leaves + new_leaves <= budget.max_leaves {
-                    leaves += new_leaves;
-                } else if budget.overflow == Overflow::Abandon {
-                    self.stats.leaf_budget_reached = true;
-                    return Attempt::Abandoned(Limit::Leaves(budget.max_leaves));
-                } else {
-                    // Over budget: the pairs that asked for element splits decide again without
-                    // them.
-                    let pairs: Vec<(u32, u32)> = splits.iter().map(|&i| pending[i]).collect();
-                    splits
-                        .iter()
-                        .zip(decide(&pairs, true))
-                        .for_each(|(&i, decision)| decisions[i] = decision);
-                    self.stats.leaf_budget_reached = true;
-                }
-            }
+            };
             pending = self.next_generation(pending, decisions, &mut sources);
             (run.progress)(Progress::Refining {
                 knob: run.knob,
                 round: run.round,
-                leaves,
+                leaves: run.leaves,
                 links: self.links.len(),
                 undecided: pending.len(),
             });
         }
-        self.stats.rays += rays_cast;
-        self.stats.shaft_decided += shaft_decided;
-        Attempt::Done(())
+    }
+
+    /// Decides one generation of `pending` pairs; returns the decisions and the leaves their
+    /// element splits add, or, while the knob can still coarsen, the budget they would pass
+    /// and by how much (what the whole generation would make over what the budget allows).
+    fn decide_generation(
+        &mut self,
+        pending: &[(u32, u32)],
+        sources: &NodeRadiosity,
+        target: &Fineness,
+        occluders: &Occluders,
+        rays: FormFactorSettings,
+        run: &Pass,
+    ) -> Result<(Vec<Decision>, usize), (Limit, f64)> {
+        let budget = run.budget;
+        // Past the link budget no pair splits: each is kept as it is (or dropped unseen).
+        let tolerance = match self.stats.link_budget_reached {
+            true => f64::INFINITY,
+            false => target.tolerance,
+        };
+        let decide = |this: &mut Hierarchy, pairs: &[(u32, u32)], frozen: bool| {
+            let refiner = Decider {
+                factors: LinkFactors::new(this, occluders, rays),
+                sources,
+                target: Fineness {
+                    tolerance,
+                    ..target.frozen_if(frozen)
+                },
+            };
+            let decisions: Vec<Decision> = pairs
+                .par_iter()
+                .map(|&(r, s)| refiner.decide(r, s))
+                .collect();
+            let (cast, decided) = refiner.factors.into_counts();
+            this.stats.rays += cast;
+            this.stats.shaft_decided += decided;
+            decisions
+        };
+        let frozen = self.stats.leaf_budget_reached;
+        // Decided a slice at a time while the knob can coarsen, so that a generation that will
+        // be decided again stops as soon as the links kept plus the pairs made so far pass the
+        // budget (both only grow), instead of being decided to its end first.
+        let watch_links = run.can_coarsen() && !self.stats.link_budget_reached;
+        let slice = if watch_links {
+            (pending.len() / GENERATION_SLICES).max(MIN_SLICE)
+        } else {
+            pending.len().max(1)
+        };
+        let mut decisions = Vec::with_capacity(pending.len());
+        let (mut made, mut fewest) = (self.links.len(), 0);
+        for pairs in pending.chunks(slice) {
+            let decided = decide(self, pairs, frozen);
+            for (&(r, s), decision) in pairs.iter().zip(&decided) {
+                let (now, coarser) = self.pairs_made(r, s, decision);
+                (made, fewest) = (made + now, fewest + coarser);
+            }
+            decisions.extend(decided);
+            // Where even the coarsest knob would make too many over the whole generation
+            // (clusters receive through their faces: on a 125k-triangle model, 7M pairs at
+            // every knob), coarsening cannot help: the generation is decided to its end, and
+            // the next one stops pairs splitting at the link budget.
+            let in_all = |n: usize| n as f64 * pending.len() as f64 / decisions.len() as f64;
+            if watch_links
+                && made > budget.max_links
+                && self.links.len() as f64 + in_all(fewest) <= budget.max_links as f64
+            {
+                let overshoot = in_all(made - self.links.len()) + self.links.len() as f64;
+                return Err((
+                    Limit::Links(budget.max_links),
+                    overshoot / budget.max_links as f64,
+                ));
+            }
+        }
+        if frozen {
+            return Ok((decisions, 0));
+        }
+        let (splits, new_leaves) = self.element_splits(pending, &decisions);
+        if run.leaves + new_leaves <= budget.max_leaves {
+            return Ok((decisions, new_leaves));
+        }
+        if run.can_coarsen() {
+            let overshoot = (run.leaves + new_leaves) as f64 / budget.max_leaves as f64;
+            return Err((Limit::Leaves(budget.max_leaves), overshoot));
+        }
+        // Over budget: the pairs that asked for element splits decide again without them.
+        let pairs: Vec<(u32, u32)> = splits.iter().map(|&i| pending[i]).collect();
+        let again = decide(self, &pairs, true);
+        splits
+            .iter()
+            .zip(again)
+            .for_each(|(&i, decision)| decisions[i] = decision);
+        self.stats.leaf_budget_reached = true;
+        Ok((decisions, 0))
     }
 
     /// Applies a generation's `decisions` on its `pending` pairs: links kept, elements split
@@ -305,11 +391,11 @@ impl Hierarchy {
         target: &Fineness,
     ) -> Vec<(u32, u32)> {
         let node = |n: u32| &self.tree.nodes[n as usize];
-        let smallest = smallest_while(self.stats.leaf_budget_reached, target.smallest);
+        let target = target.frozen_if(self.stats.leaf_budget_reached);
         let (redo, keep): (Vec<Link>, Vec<Link>) = self.links.par_iter().partition(|l| {
             let (r, s) = (node(l.receiver), node(l.source));
             LinkErrors::new(r, sources.at(l.source), l.factor as f64, l.spread as f64)
-                .end_to_split(r, s, target.tolerance, smallest)
+                .end_to_split(r, s, &target)
                 .is_some()
         });
         if !redo.is_empty() {
@@ -319,18 +405,21 @@ impl Hierarchy {
     }
 
     /// The links or pairs `decision` on pair `(r, s)` makes: one kept link, or the pairs of
-    /// the split end's children.
-    fn pairs_made(&self, r: u32, s: u32, decision: &Decision) -> usize {
+    /// the split end's children; and the fewest it would make at any coarser knob (a cluster
+    /// that receives always splits, any other split could be kept as one link).
+    fn pairs_made(&self, r: u32, s: u32, decision: &Decision) -> (usize, usize) {
         let children = |n: u32| match self.tree.is_unsplit_element(n) {
             true => ELEMENT_CHILDREN,
             false => self.tree.nodes[n as usize].child_count as usize,
         };
+        let cluster_receives = self.tree.nodes[r as usize].element.is_none();
         match decision {
-            Decision::Drop => 0,
-            Decision::Keep(_) => 1,
-            Decision::SplitReceiver => children(r),
-            Decision::SplitSource => children(s),
-            Decision::SplitBoth => children(r) * children(r),
+            Decision::Drop => (0, 0),
+            Decision::Keep(_) => (1, 1),
+            Decision::SplitReceiver if cluster_receives => (children(r), children(r)),
+            Decision::SplitReceiver => (children(r), 1),
+            Decision::SplitSource => (children(s), 1),
+            Decision::SplitBoth => (children(r) * children(r), children(r) * children(r)),
         }
     }
 
@@ -438,12 +527,8 @@ impl LinkErrors {
     /// error splits, or the other if that one is at the smallest size and its own error still
     /// exceeds the `tolerance`. With a cluster at either end, whose factor is only a bound or a
     /// sample, the larger end is split.
-    fn end_to_split(&self, r: &Node, s: &Node, tolerance: f64, smallest: f64) -> Option<End> {
-        let can_split = |n: &Node| {
-            n.element
-                .as_ref()
-                .is_none_or(|e| n.radius > smallest * e.size_scale && e.depth < MAX_DEPTH)
-        };
+    fn end_to_split(&self, r: &Node, s: &Node, target: &Fineness) -> Option<End> {
+        let (tolerance, can_split) = (target.tolerance, |n: &Node| target.can_split(n));
         if self.receiver + self.source <= tolerance {
             return None;
         }
@@ -469,12 +554,6 @@ impl LinkErrors {
     }
 }
 
-/// The smallest element radius (per error and face scale) to refine with: none can split once
-/// the leaf budget is `frozen`.
-fn smallest_while(frozen: bool, smallest: f64) -> f64 {
-    if frozen { f64::INFINITY } else { smallest }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -482,6 +561,48 @@ mod tests {
     use crate::hierarchy::fixtures::{add_parallelogram, build, unit_box};
     use crate::scene::{Material, Scene};
     use glam::{DVec3, dvec3};
+
+    #[test]
+    fn a_sliver_is_as_small_as_its_area_and_a_square_as_its_corners() {
+        let mut scene = Scene::default();
+        let grey = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        add_parallelogram(
+            &mut scene,
+            "square",
+            (DVec3::ZERO, DVec3::X, DVec3::Z),
+            grey,
+        );
+        // A triangle 4 m long and 1 cm wide, standing a little away.
+        let strip = scene.add_object("strip");
+        let at = dvec3(0.0, 0.0, 2.0);
+        scene.add_polygon(
+            strip,
+            &[at, at + DVec3::X * 4.0, at + dvec3(4.0, 0.0, 0.01)],
+            grey,
+        );
+        let hierarchy = build(&scene, 0.5);
+        let size = |face: usize| {
+            element_size(&hierarchy.tree.nodes[hierarchy.tree.face_node[face] as usize])
+        };
+        assert!((size(0) - 0.5f64.sqrt()).abs() < 1e-12, "{}", size(0));
+        let area = 0.5 * 4.0 * 0.01;
+        let equilateral = (4.0 * area / (3.0 * 3.0f64.sqrt())).sqrt();
+        assert!(
+            (size(1) - equilateral).abs() < 1e-12,
+            "{} vs {equilateral}",
+            size(1)
+        );
+        assert!(hierarchy.tree.nodes[hierarchy.tree.face_node[1] as usize].radius > 1.0);
+    }
+
+    #[test]
+    fn the_finest_radius_is_a_discs_share_of_the_area_per_leaf() {
+        assert!((finest_radius(std::f64::consts::PI * 1e6, 1_000_000) - 1.0).abs() < 1e-12);
+        assert_eq!(finest_radius(0.0, 0), 0.0);
+    }
 
     #[test]
     fn a_large_floor_refines_to_the_scale_of_what_stands_on_it() {
