@@ -521,7 +521,7 @@ mod tests {
             said_coarsenings(
                 &format!("{max_links} links (--max-links)"),
                 0.1,
-                &[0.2, 0.8]
+                &[0.2, 0.4, 0.8]
             )
         );
         // A generation that would pass the budget is decided again, coarser: none finishes
