@@ -8,7 +8,7 @@ Fetches (once; cached in cache/corpus/, checked by SHA-256) and writes scenes/co
 - monastery.obj: the samurai monastery in pybullet_data (PyPI `pybullet` 3.2.7, under its zlib
   licence; 124,990 triangles as shipped, Kd 0.64 everywhere) on a ground quad under an
   emitting sky quad; monastery-piece.obj: the faces of it within a 20 m square (a 6.7k-triangle
-  piece, the same ground and sky).
+  piece under a ground and sky of its own size).
 - living-room.obj: a 8 x 6 x 3 m room furnished with Blend Swap models of Debian's
   `sweethome3d-furniture` 1.8-1 (its BlendSwap-CC-0 library, CC0), lit by a ceiling lamp.
 - teddy.obj: the teddy bear of that library (curved triangle soup) on a floor under a lamp.
