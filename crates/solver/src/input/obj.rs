@@ -19,7 +19,11 @@ pub fn load_obj(path: &Path) -> Result<Scene, SceneError> {
     let mtl_path = first_mtllib(&text)
         .map(|m| folder.join(m))
         .unwrap_or_else(|| path.into());
-    let (checked, textures, load_warnings) = radiosity_materials(&mtl_path, &materials)?;
+    let RadiosityMaterials {
+        materials: checked,
+        textures,
+        warnings: load_warnings,
+    } = radiosity_materials(&mtl_path, &materials)?;
     let mut scene = Scene {
         view: find_view(path, &text)?,
         textures,
@@ -97,6 +101,16 @@ fn parse(path: &Path, text: &str) -> Result<(Vec<tobj::Model>, Vec<tobj::Materia
 /// A material and the index of its `map_Kd` texture, if it has one.
 type TexturedMaterial = (Material, Option<u32>);
 
+/// The MTL materials as radiosity takes them ([`radiosity_materials`]).
+struct RadiosityMaterials {
+    /// One per MTL material, in its order.
+    materials: Vec<TexturedMaterial>,
+    /// The textures they name, each once.
+    textures: Vec<Texture>,
+    /// What was changed to take them as shipped.
+    warnings: Vec<String>,
+}
+
 /// Each MTL material as radiosity takes it (with the index of its `map_Kd` texture), the
 /// textures they name, each loaded once, and what was changed to take them as shipped: a `Kd`
 /// of 1 read as [`MAX_REFLECTANCE`], a `map_Kd` file that is not there left out (exporters
@@ -104,7 +118,7 @@ type TexturedMaterial = (Material, Option<u32>);
 fn radiosity_materials(
     mtl_path: &Path,
     materials: &[tobj::Material],
-) -> Result<(Vec<TexturedMaterial>, Vec<Texture>, Vec<String>), SceneError> {
+) -> Result<RadiosityMaterials, SceneError> {
     let mut textures: Vec<(PathBuf, Texture)> = Vec::new();
     let mut warnings = Vec::new();
     let checked = materials
@@ -172,11 +186,11 @@ fn radiosity_materials(
                 })
         })
         .collect::<Result<_, _>>()?;
-    Ok((
-        checked,
-        textures.into_iter().map(|(_, texture)| texture).collect(),
+    Ok(RadiosityMaterials {
+        materials: checked,
+        textures: textures.into_iter().map(|(_, texture)| texture).collect(),
         warnings,
-    ))
+    })
 }
 
 /// Adds the faces of `mesh` to `object`, textured where `texture` is given and the mesh has a
