@@ -111,6 +111,77 @@ fn plates_and_hinge_give_rho_f_e() {
     assert!((got / expected - 1.0).abs() < 0.01, "{got} vs {expected}");
 }
 
+/// The area mean over `object` of what viewers see: each patch's corner values interpolated
+/// linearly over its fan triangles.
+fn smooth_mean(solved: &Solved, object: &str) -> f64 {
+    let (mut light, mut area) = (0.0, 0.0);
+    for patch in solved
+        .mesh
+        .patches
+        .iter()
+        .filter(|p| solved.scene.objects[p.object as usize].name == object)
+    {
+        let corners = &patch.corners[..patch.corner_count()];
+        let at = |i: usize| solved.mesh.positions[corners[i] as usize];
+        let value = |i: usize| solved.vertex_radiosity[corners[i] as usize].x;
+        for k in 1..corners.len() - 1 {
+            let a = 0.5 * (at(k) - at(0)).cross(at(k + 1) - at(0)).length();
+            light += a * (value(0) + value(k) + value(k + 1)) / 3.0;
+            area += a;
+        }
+    }
+    light / area
+}
+
+#[test]
+fn a_plate_of_triangle_soup_under_a_lamp_keeps_its_light_in_what_viewers_see() {
+    // The plates of Howell's C-11, the receiver as 16 x 16 squares of two triangles each with
+    // vertices of their own (soup, as exported models are): what viewers are shown over it
+    // must hold the light the solution gives it, and that the exact factor gives.
+    let (rho, emission, n) = (0.6, 10.0, 16);
+    let mut scene = Scene::default();
+    let receiver = scene.add_object("receiver");
+    let step = 1.0 / n as f64;
+    for i in 0..n {
+        for j in 0..n {
+            let o = dvec3(i as f64 * step, j as f64 * step, 0.0);
+            let (x, y) = (DVec3::X * step, DVec3::Y * step);
+            scene.add_polygon(receiver, &[o, o + x, o + x + y], grey(rho, 0.0));
+            scene.add_polygon(receiver, &[o, o + x + y, o + y], grey(rho, 0.0));
+        }
+    }
+    add_rect(
+        &mut scene,
+        "emitter",
+        dvec3(0.0, 0.0, 1.0),
+        DVec3::Y,
+        DVec3::X,
+        grey(0.0, emission),
+    );
+    let expected = rho * howell_parallel(1.0, 1.0, 1.0) * emission;
+    for error in [0.1, 0.03] {
+        let solved = solve(scene.clone(), error);
+        let (flat, smooth) = (
+            mean_of(&solved, "receiver").x,
+            smooth_mean(&solved, "receiver"),
+        );
+        println!(
+            "soup plate, knob {error}: {} leaves, flat {:+.3}%, smooth {:+.3}% against {expected:.5}",
+            solved.radiosity.len(),
+            100.0 * (flat / expected - 1.0),
+            100.0 * (smooth / expected - 1.0)
+        );
+        assert!(
+            (flat / expected - 1.0).abs() < 1e-3,
+            "flat {flat} vs {expected}"
+        );
+        assert!(
+            (smooth / expected - 1.0).abs() < 1e-3,
+            "smooth {smooth} vs {expected}"
+        );
+    }
+}
+
 #[test]
 fn no_light_leaks_through_a_closed_wall() {
     let solved = solve(two_rooms_one_lamp(), 0.05);
