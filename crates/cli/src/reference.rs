@@ -4,7 +4,7 @@ use crate::{ProgressPrinter, create_parent};
 use anyhow::Context;
 use solver::reference::{Reference, place_probes, trace_probes};
 use solver::visibility::Occluders;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The arguments of `radcast reference`.
 #[derive(clap::Args)]
@@ -39,33 +39,45 @@ impl ReferenceCommand {
             probes > 0 && samples > 1,
             "--probes must be at least 1 and --samples at least 2"
         );
-        let scene = solver::load_scene(&path)?;
-        // Before minutes of tracing, not after.
-        create_parent(&out)?;
-        let occluders = Occluders::new(&scene);
-        let printer = ProgressPrinter::new();
-        let placed = place_probes(&scene, probes, seed);
-        let traced = trace_probes(&scene, &occluders, &placed, samples, seed, &|p| {
-            printer.report(p)
-        });
-        let command = format!(
-            "radcast reference {} --probes {probes} --samples {samples} --seed {seed} --out {}",
-            path.display(),
-            out.display()
-        );
-        let reference = Reference {
-            command,
-            seed,
-            samples,
-            probes: traced,
-        };
-        std::fs::write(&out, serde_json::to_string_pretty(&reference)?)
-            .with_context(|| format!("{}: cannot write", out.display()))?;
-        eprintln!(
-            "wrote {} ({} probes x {samples} paths)",
-            out.display(),
-            probes
-        );
-        Ok(())
+        write_reference(&path, probes, samples, seed, &out).map(|_| ())
     }
+}
+
+/// Path-traces `probes` probes of the scene at `path`, `samples` paths each, and writes the
+/// reference to `out` (its folder made first); returns it.
+pub fn write_reference(
+    path: &Path,
+    probes: usize,
+    samples: u32,
+    seed: u64,
+    out: &Path,
+) -> anyhow::Result<Reference> {
+    let scene = solver::load_scene(path)?;
+    // Before minutes of tracing, not after.
+    create_parent(out)?;
+    let occluders = Occluders::new(&scene);
+    let printer = ProgressPrinter::new();
+    let placed = place_probes(&scene, probes, seed);
+    let traced = trace_probes(&scene, &occluders, &placed, samples, seed, &|p| {
+        printer.report(p)
+    });
+    let command = format!(
+        "radcast reference {} --probes {probes} --samples {samples} --seed {seed} --out {}",
+        path.display(),
+        out.display()
+    );
+    let reference = Reference {
+        command,
+        seed,
+        samples,
+        probes: traced,
+    };
+    std::fs::write(out, serde_json::to_string_pretty(&reference)?)
+        .with_context(|| format!("{}: cannot write", out.display()))?;
+    eprintln!(
+        "wrote {} ({} probes x {samples} paths)",
+        out.display(),
+        probes
+    );
+    Ok(reference)
 }

@@ -184,6 +184,53 @@ fn generate_writes_a_room_that_loads() {
 }
 
 #[test]
+fn bench_error_makes_the_reference_of_a_scene_that_has_none() {
+    let folder = std::env::temp_dir().join(format!("radcast-own-{}", std::process::id()));
+    std::fs::create_dir_all(&folder).unwrap();
+    for file in ["shadow-slab.obj", "shadow-slab.mtl"] {
+        let shipped = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/");
+        std::fs::copy(format!("{shipped}{file}"), folder.join(file)).unwrap();
+    }
+    let scene = folder.join("shadow-slab.obj");
+    let reference = folder.join("reference").join("shadow-slab.json");
+    let sweep = |out: &str| {
+        radcast_ok(&[
+            "bench",
+            "--error",
+            scene.to_str().unwrap(),
+            "--counts",
+            "60",
+            "--sweep-rays",
+            "1",
+            "--sweep-error",
+            "0.3",
+            "--repeat",
+            "1",
+            "--out-dir",
+            folder.join(out).to_str().unwrap(),
+        ])
+        .1
+    };
+    let said = sweep("first");
+    assert!(
+        said.contains(&format!(
+            "{}: no reference: path-tracing one (1000 probes x 4096 paths)",
+            reference.display()
+        )),
+        "{said}"
+    );
+    let made: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&reference).expect("written")).unwrap();
+    assert_eq!(made["probes"].as_array().map(Vec::len), Some(1000));
+    assert_eq!(made["samples"].as_u64(), Some(4096));
+    let table = std::fs::read_to_string(folder.join("first/speed-vs-error.md")).expect("table");
+    assert!(table.contains("| hierarchical E=0.3 |"), "{table}");
+    // Made once: the next sweep reads it.
+    assert!(!sweep("second").contains("no reference"));
+    std::fs::remove_dir_all(&folder).unwrap();
+}
+
+#[test]
 fn bench_error_writes_its_table_and_plot_under_the_given_name() {
     let folder = std::env::temp_dir().join(format!("radcast-bench-{}", std::process::id()));
     let args = [
