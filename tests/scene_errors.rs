@@ -180,7 +180,7 @@ fn a_texture_file_that_is_not_there_leaves_kd_alone_and_is_said() {
     let obj = format!("mtllib scene.mtl\no a\nusemtl wood\n{SQUARE}f 1 2 3 4\n");
     let (scene, path, _folder) = load(
         &obj,
-        Some("newmtl wood\nKd 0.5 0.4 0.3\nmap_Kd C:/Users/someone/Desktop/oak.jpg\n"),
+        Some("newmtl wood\nKd 0.5 0.4 0.3\nmap_Kd C:/Documents and Settings/someone/oak.jpg\n"),
     );
     let scene = scene.expect("loads");
     assert_eq!(
@@ -196,7 +196,7 @@ fn a_texture_file_that_is_not_there_leaves_kd_alone_and_is_said() {
             mtl.display(),
             mtl.parent()
                 .unwrap()
-                .join("C:/Users/someone/Desktop/oak.jpg")
+                .join("C:/Documents and Settings/someone/oak.jpg")
                 .display()
         )]
     );

@@ -127,13 +127,8 @@ fn radiosity_materials(
             let rgb = |c: Option<[f32; 3]>, absent: Rgb| {
                 c.map(|c| Rgb::from(c.map(f64::from))).unwrap_or(absent)
             };
-            // map_Kd: Kd (1 when absent) times the texture's linear mean; its options come
-            // before the file name, which is the last word.
-            let texture = match m
-                .diffuse_texture
-                .as_deref()
-                .and_then(|t| t.split_whitespace().last())
-            {
+            // map_Kd: Kd (1 when absent) times the texture's linear mean.
+            let texture = match m.diffuse_texture.as_deref().and_then(texture_file) {
                 Some(name) => {
                     let file = mtl_path.parent().unwrap_or(Path::new(".")).join(name);
                     match textures.iter().position(|(path, _)| *path == file) {
@@ -426,4 +421,52 @@ fn lint_face_vertex(word: &str, defined: &Defined) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// The file of a texture statement (what follows `map_Kd`): its options, each with its
+/// arguments (the MTL spec's `-o`, `-s` and `-t` take up to three numbers, `-mm` two, the rest
+/// one), come first, and the rest is the file name, spaces and all (`C:/Documents and
+/// Settings/...`, as exporters write it).
+fn texture_file(statement: &str) -> Option<&str> {
+    let mut rest = statement.trim();
+    while rest.starts_with('-') {
+        let (option, after) = rest.split_once(char::is_whitespace).unwrap_or((rest, ""));
+        let (least, most) = match option {
+            "-o" | "-s" | "-t" => (1, 3),
+            "-mm" => (2, 2),
+            _ => (1, 1),
+        };
+        rest = after.trim_start();
+        for taken in 0..most {
+            let (word, after) = rest.split_once(char::is_whitespace).unwrap_or((rest, ""));
+            if taken >= least && word.parse::<f64>().is_err() {
+                break;
+            }
+            rest = after.trim_start();
+        }
+    }
+    (!rest.is_empty()).then_some(rest)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::texture_file;
+
+    #[test]
+    fn a_texture_file_is_what_follows_the_options_spaces_and_all() {
+        assert_eq!(texture_file("wood.png"), Some("wood.png"));
+        assert_eq!(
+            texture_file(" -bm 0.5 -clamp on wood.png "),
+            Some("wood.png")
+        );
+        assert_eq!(texture_file("-s 2 2 1 -o 0.5 wood.png"), Some("wood.png"));
+        assert_eq!(texture_file("-s 2 my wood.png"), Some("my wood.png"));
+        assert_eq!(texture_file("-mm 0 1 wood.png"), Some("wood.png"));
+        assert_eq!(
+            texture_file("C:/Documents and Settings/jeremy/oak.jpg"),
+            Some("C:/Documents and Settings/jeremy/oak.jpg")
+        );
+        assert_eq!(texture_file("-clamp on"), None);
+        assert_eq!(texture_file(""), None);
+    }
 }
