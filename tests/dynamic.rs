@@ -619,3 +619,119 @@ async fn an_edit_the_solver_refuses_is_reported_and_the_next_edit_still_applies(
     );
     assert_eq!(get_text(address, "/healthz").await, (200, "ok\n".into()));
 }
+
+/// A seeded stream of numbers in [0, 1) (splitmix64): the edits of the property test below.
+struct Draws(u64);
+
+impl Draws {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        (z ^ (z >> 31)) as f64 / u64::MAX as f64
+    }
+}
+
+#[test]
+fn after_any_sequence_of_edits_and_moves_the_session_equals_a_fresh_solve_of_its_scene() {
+    // Random sequences of emission edits (the light off among them) and moves of either block
+    // (each kept within 60 mm of where it started), on the Cornell box at 300 patches and at
+    // the default 1,000: after each solve, the patch and vertex values equal a solve from
+    // scratch of the scene as edited, on the same mesh.
+    // What the sequences did, so that a change of seeds cannot leave a kind of edit untried.
+    let mut tried = std::collections::BTreeSet::new();
+    for (patches, seed) in [(300, 1), (1000, 2), (1000, 3), (1000, 4)] {
+        let mut request = SolveRequest {
+            patches: PatchTarget::Count(patches),
+            ..request()
+        };
+        request.solver.tolerance = 1e-10;
+        let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+        let mesh = solver::Mesh::build(&scene, request.patches);
+        let mut session =
+            solver::Session::new(&scene, &mesh, &request, &solver::no_progress).unwrap();
+        session.solve(&solver::no_progress);
+        let light = scene
+            .objects
+            .iter()
+            .position(|o| o.name == "light")
+            .unwrap() as u32;
+        let mut emission = Rgb::new(17.0, 12.0, 4.0);
+        let mut moved = [glam::DVec3::ZERO; 2];
+        let mut draws = Draws(seed);
+        for step in 0..6 {
+            let pick = draws.next();
+            let what = if pick < 0.5 {
+                emission = match draws.next() < 0.3 {
+                    true => Rgb::ZERO,
+                    false => Rgb::new(
+                        30.0 * draws.next(),
+                        30.0 * draws.next(),
+                        30.0 * draws.next(),
+                    ),
+                };
+                session.set_emission("light", emission).unwrap();
+                tried.insert(if emission == Rgb::ZERO {
+                    "light off"
+                } else {
+                    "light"
+                });
+                format!("light {emission}")
+            } else {
+                let block = usize::from(pick >= 0.75);
+                let name = ["short_block", "tall_block"][block];
+                let target = glam::dvec3(
+                    120.0 * draws.next() - 60.0,
+                    0.0,
+                    120.0 * draws.next() - 60.0,
+                );
+                session.move_object(name, target - moved[block]).unwrap();
+                moved[block] = target;
+                tried.insert(name);
+                format!("{name} to {target}")
+            };
+            let report = session.solve(&solver::no_progress);
+            assert!(report.converged, "step {step} ({what}): {report:?}");
+            let mut edited = session.scene().clone();
+            edited
+                .faces
+                .iter_mut()
+                .filter(|f| f.object == light)
+                .for_each(|f| f.emission = emission);
+            let mut edited_mesh = session.mesh().clone();
+            edited_mesh
+                .patches
+                .iter_mut()
+                .filter(|p| p.object == light)
+                .for_each(|p| p.emission = emission);
+            let fresh =
+                solver::solve_mesh(&edited, &edited_mesh, &request, &solver::no_progress).unwrap();
+            let worst = |got: &[Rgb], expected: &[Rgb]| {
+                got.iter()
+                    .zip(expected)
+                    .map(|(a, b)| (*a - *b).abs().max_element() / b.max_element().max(1e-2))
+                    .fold(0.0, f64::max)
+            };
+            let (patch_error, vertex_error) = (
+                worst(session.radiosity(), &fresh.radiosity),
+                worst(&session.vertex_radiosity(), &fresh.vertex_radiosity),
+            );
+            println!(
+                "{patches} patches, seed {seed}, step {step} ({what}): patches off by {patch_error:.1e}, vertices by {vertex_error:.1e}"
+            );
+            assert!(
+                patch_error < 1e-5,
+                "step {step} ({what}): patches {patch_error}"
+            );
+            assert!(
+                vertex_error < 1e-5,
+                "step {step} ({what}): vertices {vertex_error}"
+            );
+        }
+    }
+    assert_eq!(
+        tried.into_iter().collect::<Vec<_>>(),
+        ["light", "light off", "short_block", "tall_block"]
+    );
+}
