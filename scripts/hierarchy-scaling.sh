@@ -2,9 +2,10 @@
 # Cost against scene size for one family of generated scenes: hierarchical radiosity at the
 # default settings (or at --error E), each solve measured against a path-traced reference of
 # its own scene. Prints a Markdown table (docs/BENCHMARKS.md).
-# Usage: scripts/hierarchy-scaling.sh room|town [--error E] SIZE...
+# Usage: scripts/hierarchy-scaling.sh room|town|corpus [--error E] SIZE|NAME...
 #   room: SIZE pieces of furniture (radcast generate --pieces); town: about SIZE triangles of
-#   soup under a sky (radcast generate --town).
+#   soup under a sky (radcast generate --town); corpus: the real models of scripts/corpus.py
+#   by NAME (monastery, monastery-piece, living-room, teddy).
 set -eu
 cd "$(dirname "$0")/.."
 family=$1
@@ -17,17 +18,24 @@ fi
 case $family in
     room) flag=--pieces ;;
     town) flag=--town ;;
-    *) echo "usage: $0 room|town [--error E] SIZE..." >&2; exit 2 ;;
+    corpus) flag="" ;;
+    *) echo "usage: $0 room|town|corpus [--error E] SIZE|NAME..." >&2; exit 2 ;;
 esac
 cargo build --quiet --release -p radcast-cli
 radcast=./target/release/radcast
 echo "| $family | triangles | knob used | leaves | links | links/leaf | shadow rays | refine s | solve s | total s | peak MB | smooth RMS | flat RMS | energy |"
 echo "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
 for n in "$@"; do
-    scene=scenes/generated/$family-$n.obj
-    reference=scenes/generated/$family-$n.reference.json
-    [ -f "$scene" ] || $radcast generate $flag "$n" --out "$scene" 2>/dev/null
-    [ -f "$reference" ] || $radcast reference "$scene" --probes 1000 --samples 16384 --out "$reference" 2>/dev/null
+    if [ "$family" = corpus ]; then
+        scene=scenes/corpus/$n.obj
+        reference=scenes/corpus/reference/$n.json
+        [ -f "$reference" ] || python3 scripts/corpus.py --references >/dev/null
+    else
+        scene=scenes/generated/$family-$n.obj
+        reference=scenes/generated/$family-$n.reference.json
+        [ -f "$scene" ] || $radcast generate $flag "$n" --out "$scene" 2>/dev/null
+        [ -f "$reference" ] || $radcast reference "$scene" --probes 1000 --samples 16384 --out "$reference" 2>/dev/null
+    fi
     # shellcheck disable=SC2086 # $knob is empty or two words.
     $radcast solve "$scene" --method hierarchical $knob --reference "$reference" --json 2>/dev/null | python3 -c "
 import json, sys
