@@ -106,6 +106,15 @@ fn stats(pairs: &[(Rgb, Rgb)]) -> ErrorStats {
     }
 }
 
+/// A solution read at the probes that count: per probe, (solution, reference) for each
+/// reading, and the reference's variance there (its standard errors squared, summed over
+/// channels).
+pub(crate) struct Readings {
+    pub(crate) flat: Vec<(Rgb, Rgb)>,
+    pub(crate) smooth: Vec<(Rgb, Rgb)>,
+    pub(crate) variance: Vec<f64>,
+}
+
 /// Measures a solution on `mesh` (built from `scene`) at the probes: `radiosity` per patch for
 /// the flat reading, `corners` per mesh corner (what viewers are sent) for the smooth one.
 pub fn evaluate(
@@ -115,6 +124,33 @@ pub fn evaluate(
     corners: &[Rgb],
     probes: &[Probe],
 ) -> SolutionError {
+    let Readings {
+        flat,
+        smooth,
+        variance,
+    } = read_at(scene, mesh, radiosity, corners, probes);
+    let reference_sq: f64 = flat.iter().map(|(_, r)| r.length_squared()).sum();
+    let noise_sq: f64 = variance.iter().sum();
+    SolutionError {
+        probes: flat.len(),
+        flat: stats(&flat),
+        smooth: stats(&smooth),
+        reference_noise: if reference_sq > 0.0 {
+            (noise_sq / reference_sq).sqrt()
+        } else {
+            0.0
+        },
+    }
+}
+
+/// Both readings of a solution at the probes on non-emitting faces ([`Readings`]).
+pub(crate) fn read_at(
+    scene: &Scene,
+    mesh: &Mesh,
+    radiosity: &[Rgb],
+    corners: &[Rgb],
+    probes: &[Probe],
+) -> Readings {
     let faces = face_ranges(scene, mesh);
     // The pieces of a source face share its material: any of them tells whether it emits.
     let mut source_emits = vec![None; faces.len()];
@@ -132,22 +168,12 @@ pub fn evaluate(
         flat.push((radiosity[located.patch], reference));
         smooth.push((located.smooth, reference));
     }
-    let noise_sq: f64 = counted
-        .iter()
-        .map(|p| Rgb::from(p.standard_error).length_squared())
-        .sum();
-    let reference_sq: f64 = counted
-        .iter()
-        .map(|p| Rgb::from(p.radiosity).length_squared())
-        .sum();
-    SolutionError {
-        probes: counted.len(),
-        flat: stats(&flat),
-        smooth: stats(&smooth),
-        reference_noise: if reference_sq > 0.0 {
-            (noise_sq / reference_sq).sqrt()
-        } else {
-            0.0
-        },
+    Readings {
+        flat,
+        smooth,
+        variance: counted
+            .iter()
+            .map(|p| Rgb::from(p.standard_error).length_squared())
+            .collect(),
     }
 }

@@ -10,6 +10,7 @@
 pub mod accuracy;
 #[cfg(feature = "clap")]
 pub mod args;
+pub mod check;
 pub mod generate;
 pub mod reference;
 pub mod visibility;

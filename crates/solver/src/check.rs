@@ -1,0 +1,142 @@
+//! The self-check: a solution's error estimated against probes path-traced for it, with a seed
+//! of their own (never a stored reference), the tracing's own noise taken out.
+//!
+//! The path tracer depends on no mesh, so it can judge any solve of any scene. At each probe
+//! the squared error it measures is the solution's squared error plus the probe's variance;
+//! subtracting the variance (and from the reference's own square) leaves an unbiased ratio,
+//! `R = sum(|B - B^|^2 - s^2) / sum(|B^|^2 - s^2)`, whose square root is the relative RMS. Its
+//! interval is the ratio estimator's (delta method, Cochran 1977, "Sampling Techniques" 6.3)
+//! at three standard errors.
+
+use crate::accuracy::read_at;
+use crate::mesh::Mesh;
+use crate::reference::{place_probes, trace_probes};
+use crate::scene::{Rgb, Scene};
+use crate::visibility::Occluders;
+use serde::Serialize;
+
+/// How many probes and paths the check traces, and its seed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CheckSettings {
+    /// Probe points, spread over the non-emitting surfaces by area.
+    pub probes: usize,
+    /// Paths per probe.
+    pub samples: u32,
+    /// Seed of the probes and paths: not the shipped references' (1).
+    pub seed: u64,
+}
+
+impl Default for CheckSettings {
+    fn default() -> Self {
+        CheckSettings {
+            probes: 256,
+            samples: 1024,
+            seed: 0x5e1f_c4ec,
+        }
+    }
+}
+
+/// One reading's estimated error, relative to the scene's RMS radiosity at the probes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ReadingEstimate {
+    /// The relative RMS error, noise taken out.
+    pub rms: f64,
+    /// Lower end of its interval (three standard errors).
+    pub low: f64,
+    /// Upper end of its interval.
+    pub high: f64,
+    /// `sum B / sum B^ - 1` over the probes: the energy balance.
+    pub energy: f64,
+}
+
+/// What the self-check found.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Estimate {
+    /// What viewers see: corner values interpolated.
+    pub smooth: ReadingEstimate,
+    /// Patch values.
+    pub flat: ReadingEstimate,
+    /// The tracing's own relative RMS noise, taken out of both.
+    pub noise: f64,
+    /// Probes that counted (on non-emitting faces).
+    pub probes: usize,
+    /// Seconds the check took.
+    pub seconds: f64,
+}
+
+/// Estimates the error of a solution of `scene` on `mesh`: `radiosity` per patch, `corners`
+/// per mesh corner.
+pub fn self_check(
+    scene: &Scene,
+    occluders: &Occluders,
+    mesh: &Mesh,
+    (radiosity, corners): (&[Rgb], &[Rgb]),
+    settings: &CheckSettings,
+) -> Estimate {
+    let started = std::time::Instant::now();
+    let placed = place_probes(scene, settings.probes, settings.seed);
+    let probes = trace_probes(
+        scene,
+        occluders,
+        &placed,
+        settings.samples,
+        settings.seed,
+        &crate::no_progress,
+    );
+    let readings = read_at(scene, mesh, radiosity, corners, &probes);
+    let noise_sq: f64 = readings.variance.iter().sum();
+    let reference_sq: f64 = readings.flat.iter().map(|(_, r)| r.length_squared()).sum();
+    Estimate {
+        smooth: estimate(&readings.smooth, &readings.variance),
+        flat: estimate(&readings.flat, &readings.variance),
+        noise: if reference_sq > 0.0 {
+            (noise_sq / reference_sq).sqrt()
+        } else {
+            0.0
+        },
+        probes: readings.flat.len(),
+        seconds: started.elapsed().as_secs_f64(),
+    }
+}
+
+/// The noise-corrected relative RMS of `pairs` (solution, traced), with `variance` per probe,
+/// and its interval (see the module notes).
+fn estimate(pairs: &[(Rgb, Rgb)], variance: &[f64]) -> ReadingEstimate {
+    let n = pairs.len();
+    let error: Vec<f64> = pairs
+        .iter()
+        .zip(variance)
+        .map(|((b, r), s)| (*b - *r).length_squared() - s)
+        .collect();
+    let scale: Vec<f64> = pairs
+        .iter()
+        .zip(variance)
+        .map(|((_, r), s)| r.length_squared() - s)
+        .collect();
+    let (error_sum, scale_sum): (f64, f64) = (error.iter().sum(), scale.iter().sum());
+    if n < 2 || scale_sum <= 0.0 {
+        return ReadingEstimate::default();
+    }
+    let ratio = error_sum / scale_sum;
+    // var(R) ~ n / (sum b)^2 * sum (d - R b)^2 / (n - 1).
+    let spread: f64 = error
+        .iter()
+        .zip(&scale)
+        .map(|(d, b)| (d - ratio * b).powi(2))
+        .sum();
+    let standard_error = (n as f64 * spread / (n - 1) as f64).sqrt() / scale_sum;
+    let root = |x: f64| x.max(0.0).sqrt();
+    let (solved, traced) = pairs.iter().fold((0.0, 0.0), |(a, b), (e, r)| {
+        (a + e.element_sum(), b + r.element_sum())
+    });
+    ReadingEstimate {
+        rms: root(ratio),
+        low: root(ratio - 3.0 * standard_error),
+        high: root(ratio + 3.0 * standard_error),
+        energy: if traced > 0.0 {
+            solved / traced - 1.0
+        } else {
+            0.0
+        },
+    }
+}
