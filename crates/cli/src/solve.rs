@@ -4,7 +4,9 @@ use crate::{HEAP, ProgressPrinter};
 use anyhow::Context;
 use solver::accuracy::evaluate;
 use solver::args::{SolveArgs, budget_warnings};
+use solver::check::{CheckSettings, Estimate, ReadingEstimate, self_check};
 use solver::reference::Reference;
+use solver::visibility::Occluders;
 use solver::{SolveReport, solve_file};
 use std::path::PathBuf;
 
@@ -21,7 +23,26 @@ pub struct SolveCommand {
     /// Also measure the error against this reference file (adds `error` to the JSON).
     #[arg(long)]
     pub reference: Option<PathBuf>,
+    /// After the solve, estimate its error against probes path-traced for it (64 to 1,024
+    /// probes x 1,024 paths, as many as a tenth of the solve's time allows; a seed of their
+    /// own; `estimate` in the JSON); `off` skips it.
+    #[arg(long, value_enum, default_value_t = Check::On)]
+    pub check: Check,
 }
+
+/// Whether `radcast solve` checks its answer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Check {
+    On,
+    Off,
+}
+
+/// The smooth RMS error past which the self-check's lower bound is a warning.
+const CHECK_WARNING: f64 = 0.05;
+/// The share of the solve's time the self-check may take past its first probes, and the most
+/// probes it traces.
+const CHECK_SHARE: f64 = 0.1;
+const CHECK_PROBES: usize = 1024;
 
 impl SolveCommand {
     /// Runs the command.
@@ -31,6 +52,7 @@ impl SolveCommand {
             settings,
             json,
             reference,
+            check,
         } = self;
         let request = settings.request().map_err(anyhow::Error::msg)?;
         let printer = ProgressPrinter::new();
@@ -52,7 +74,28 @@ impl SolveCommand {
                 &r.probes,
             )
         });
+        let estimate = (check == Check::On).then(|| {
+            self_check(
+                &solved.scene,
+                &Occluders::new(&solved.scene),
+                &solved.mesh,
+                (&solved.radiosity, &solved.vertex_radiosity),
+                &CheckSettings {
+                    probes: CHECK_PROBES,
+                    seconds: Some(CHECK_SHARE * solved.report.seconds.total),
+                    ..CheckSettings::default()
+                },
+            )
+        });
         let report = &solved.report;
+        if let Some(e) = estimate.filter(|e| e.smooth.low > CHECK_WARNING) {
+            eprintln!(
+                "warning: the self-check estimates {:.1}% smooth RMS error (at least {:.1}%), past {}%: refine further (a smaller --error or more --patches)",
+                100.0 * e.smooth.rms,
+                100.0 * e.smooth.low,
+                100.0 * CHECK_WARNING
+            );
+        }
         for warning in &report.warnings {
             eprintln!("warning: {warning}");
         }
@@ -80,9 +123,12 @@ impl SolveCommand {
             if let Some(measured) = measured {
                 value["error"] = serde_json::to_value(measured)?;
             }
+            if let Some(estimate) = estimate {
+                value["estimate"] = serde_json::to_value(estimate)?;
+            }
             println!("{value}");
         } else {
-            print_summary(&scene, report);
+            print_summary(&scene, report, estimate.as_ref());
             if let Some(e) = measured {
                 println!(
                     "error       smooth RMS {:.4}, max {:.3}, energy {:+.4}; flat RMS {:.4}  ({} probes, reference noise {:.4})",
@@ -99,7 +145,7 @@ impl SolveCommand {
     }
 }
 
-fn print_summary(scene: &std::path::Path, r: &SolveReport) {
+fn print_summary(scene: &std::path::Path, r: &SolveReport, estimate: Option<&Estimate>) {
     let s = &r.seconds;
     println!(
         "scene       {} ({} objects, {} triangles)",
@@ -130,6 +176,25 @@ fn print_summary(scene: &std::path::Path, r: &SolveReport) {
         "seconds     load {:.3}  mesh {:.3}  form factors {:.3}  solve {:.3}  total {:.3}",
         s.load, s.mesh, s.form_factors, s.solve, s.total
     );
+    if let Some(e) = estimate {
+        let percent = |r: &ReadingEstimate| {
+            format!(
+                "{:.1}% ({:.1}-{:.1}%), energy {:+.1}%",
+                100.0 * r.rms,
+                100.0 * r.low,
+                100.0 * r.high,
+                100.0 * r.energy
+            )
+        };
+        println!(
+            "estimate    smooth RMS {}; flat RMS {}  (self-check: {} probes, noise {:.1}%, {:.2} s)",
+            percent(&e.smooth),
+            percent(&e.flat),
+            e.probes,
+            100.0 * e.noise,
+            e.seconds
+        );
+    }
     println!(
         "{:<16} {:>14}  mean radiosity W/m^2 (r, g, b)",
         "object", "area"

@@ -28,6 +28,58 @@ fn radcast_json(args: &[&str]) -> (serde_json::Value, String) {
 }
 
 #[test]
+fn every_solve_estimates_its_error_and_warns_when_it_is_large() {
+    let solve = |patches: &str, extra: &[&str]| {
+        radcast_json(
+            &[
+                &[
+                    "solve",
+                    "scenes/cornell-box.obj",
+                    "--json",
+                    "--patches",
+                    patches,
+                ][..],
+                extra,
+            ]
+            .concat(),
+        )
+    };
+    let (fine, quiet) = solve("1000", &[]);
+    let estimate = &fine["estimate"];
+    for reading in ["smooth", "flat"] {
+        let value = |key: &str| estimate[reading][key].as_f64().expect(key);
+        assert!(
+            0.0 <= value("low") && value("low") <= value("rms") && value("rms") <= value("high"),
+            "{reading}: {estimate}"
+        );
+        assert!(value("energy").abs() < 0.1, "{reading}: {estimate}");
+    }
+    // At least its first 64 probes, whatever the solve's time; a few per cent at 1,000 patches
+    // (the stored reference reads 2.4% smooth).
+    assert!(estimate["probes"].as_u64().unwrap() >= 64, "{estimate}");
+    assert!(
+        estimate["smooth"]["low"].as_f64().unwrap() < 0.05,
+        "{estimate}"
+    );
+    assert!(estimate["noise"].as_f64().unwrap() > 0.0 && estimate["seconds"].as_f64().is_some());
+    assert!(!quiet.contains("self-check"), "{quiet}");
+    // Twelve patches for the whole box: far off, and said so with the figure.
+    let (coarse, warned) = solve("12", &[]);
+    let low = coarse["estimate"]["smooth"]["low"].as_f64().unwrap();
+    assert!(low > 0.05, "{}", coarse["estimate"]);
+    assert!(
+        warned.contains(&format!(
+            "warning: the self-check estimates {:.1}% smooth RMS error (at least {:.1}%), past 5%",
+            100.0 * coarse["estimate"]["smooth"]["rms"].as_f64().unwrap(),
+            100.0 * low
+        )),
+        "{warned}"
+    );
+    let (unchecked, _) = solve("1000", &["--check", "off"]);
+    assert!(unchecked.get("estimate").is_none(), "{unchecked}");
+}
+
+#[test]
 fn solve_json_reports_every_promised_field() {
     let (report, _) = radcast_json(&[
         "solve",
