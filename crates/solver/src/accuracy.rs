@@ -83,7 +83,8 @@ fn face_ranges(scene: &Scene, mesh: &Mesh) -> Vec<Range<usize>> {
     ranges
 }
 
-fn stats(pairs: &[(Rgb, Rgb)]) -> ErrorStats {
+/// The errors of (solution, reference) `pairs`.
+pub(crate) fn stats(pairs: &[(Rgb, Rgb)]) -> ErrorStats {
     let reference_sq: f64 = pairs.iter().map(|(_, r)| r.length_squared()).sum();
     let error_sq: f64 = pairs.iter().map(|(e, r)| (*e - *r).length_squared()).sum();
     let reference_rms = (reference_sq / pairs.len().max(1) as f64).sqrt();
@@ -124,22 +125,25 @@ pub fn evaluate(
     corners: &[Rgb],
     probes: &[Probe],
 ) -> SolutionError {
-    let Readings {
-        flat,
-        smooth,
-        variance,
-    } = read_at(scene, mesh, radiosity, corners, probes);
-    let reference_sq: f64 = flat.iter().map(|(_, r)| r.length_squared()).sum();
-    let noise_sq: f64 = variance.iter().sum();
+    let readings = read_at(scene, mesh, radiosity, corners, probes);
     SolutionError {
-        probes: flat.len(),
-        flat: stats(&flat),
-        smooth: stats(&smooth),
-        reference_noise: if reference_sq > 0.0 {
+        probes: readings.flat.len(),
+        flat: stats(&readings.flat),
+        smooth: stats(&readings.smooth),
+        reference_noise: readings.noise(),
+    }
+}
+
+impl Readings {
+    /// The reference's own relative RMS standard error at these probes.
+    pub(crate) fn noise(&self) -> f64 {
+        let noise_sq: f64 = self.variance.iter().sum();
+        let reference_sq: f64 = self.flat.iter().map(|(_, r)| r.length_squared()).sum();
+        if reference_sq > 0.0 {
             (noise_sq / reference_sq).sqrt()
         } else {
             0.0
-        },
+        }
     }
 }
 

@@ -8,7 +8,7 @@
 //! interval is the ratio estimator's (delta method, Cochran 1977, "Sampling Techniques" 6.3)
 //! at three standard errors.
 
-use crate::accuracy::read_at;
+use crate::accuracy::{read_at, stats};
 use crate::mesh::Mesh;
 use crate::reference::{place_probes, trace_probes};
 use crate::scene::{Rgb, Scene};
@@ -109,16 +109,10 @@ pub fn self_check(
         settings.seed ^ 0x9e37_79b9,
     ));
     let readings = read_at(scene, mesh, radiosity, corners, &probes);
-    let noise_sq: f64 = readings.variance.iter().sum();
-    let reference_sq: f64 = readings.flat.iter().map(|(_, r)| r.length_squared()).sum();
     Estimate {
         smooth: estimate(&readings.smooth, &readings.variance),
         flat: estimate(&readings.flat, &readings.variance),
-        noise: if reference_sq > 0.0 {
-            (noise_sq / reference_sq).sqrt()
-        } else {
-            0.0
-        },
+        noise: readings.noise(),
         probes: readings.flat.len(),
         seconds: started.elapsed().as_secs_f64(),
     }
@@ -151,17 +145,10 @@ fn estimate(pairs: &[(Rgb, Rgb)], variance: &[f64]) -> ReadingEstimate {
         .sum();
     let standard_error = (n as f64 * spread / (n - 1) as f64).sqrt() / scale_sum;
     let root = |x: f64| x.max(0.0).sqrt();
-    let (solved, traced) = pairs.iter().fold((0.0, 0.0), |(a, b), (e, r)| {
-        (a + e.element_sum(), b + r.element_sum())
-    });
     ReadingEstimate {
         rms: root(ratio),
         low: root(ratio - 3.0 * standard_error),
         high: root(ratio + 3.0 * standard_error),
-        energy: if traced > 0.0 {
-            solved / traced - 1.0
-        } else {
-            0.0
-        },
+        energy: stats(pairs).energy,
     }
 }
