@@ -109,10 +109,15 @@ fn an_obj_map_kd_is_kd_times_the_textures_linear_mean() {
         s.faces.iter().find(|f| f.object == id).unwrap().reflectance
     };
     assert!((floor(&textured) - floor(&twin)).abs().max_element() < 1e-7);
-    let missing = load("map-kd-missing.obj").unwrap_err().to_string();
-    assert!(
-        missing.contains("no-such-texture.png: cannot read"),
-        "{missing}"
+    // A texture file that is not there leaves Kd alone, and says so.
+    let missing = load("map-kd-missing.obj").expect("loads");
+    assert!(missing.textures.is_empty());
+    assert_eq!(floor(&missing), solver::Rgb::splat(0.5));
+    assert_eq!(
+        missing.load_warnings,
+        [
+            "tests/gltf/map-kd-missing.mtl: material 'textured': map_Kd tests/gltf/no-such-texture.png is not there: Kd alone is used"
+        ]
     );
 }
 
