@@ -235,6 +235,18 @@ fn generate_writes_a_room_that_loads() {
     std::fs::remove_dir_all(&folder).unwrap();
 }
 
+/// The smallest sweep: one dense count at one ray a pair, one knob, one run each.
+const SMALL_SWEEP: [&str; 8] = [
+    "--counts",
+    "60",
+    "--sweep-rays",
+    "1",
+    "--sweep-error",
+    "0.3",
+    "--repeat",
+    "1",
+];
+
 #[test]
 fn bench_error_makes_the_reference_of_a_scene_that_has_none() {
     let folder = std::env::temp_dir().join(format!("radcast-own-{}", std::process::id()));
@@ -246,21 +258,16 @@ fn bench_error_makes_the_reference_of_a_scene_that_has_none() {
     let scene = folder.join("shadow-slab.obj");
     let reference = folder.join("reference").join("shadow-slab.json");
     let sweep = |out: &str| {
-        radcast_ok(&[
-            "bench",
-            "--error",
-            scene.to_str().unwrap(),
-            "--counts",
-            "60",
-            "--sweep-rays",
-            "1",
-            "--sweep-error",
-            "0.3",
-            "--repeat",
-            "1",
-            "--out-dir",
-            folder.join(out).to_str().unwrap(),
-        ])
+        let out = folder.join(out);
+        let place = ["--out-dir", out.to_str().unwrap()];
+        radcast_ok(
+            &[
+                &["bench", "--error", scene.to_str().unwrap()],
+                &SMALL_SWEEP[..],
+                &place,
+            ]
+            .concat(),
+        )
         .1
     };
     let said = sweep("first");
@@ -286,18 +293,10 @@ fn bench_error_makes_the_reference_of_a_scene_that_has_none() {
 fn bench_error_writes_its_table_and_plot_under_the_given_name() {
     let folder = std::env::temp_dir().join(format!("radcast-bench-{}", std::process::id()));
     let args = [
-        "bench",
-        "--error",
-        "scenes/shadow-slab.obj",
-        "--counts",
-        "60",
-        "--sweep-rays",
-        "1",
-        "--sweep-error",
-        "0.3",
-        "--repeat",
-        "1",
-    ];
+        &["bench", "--error", "scenes/shadow-slab.obj"][..],
+        &SMALL_SWEEP,
+    ]
+    .concat();
     radcast_ok(
         &[
             &args[..],
