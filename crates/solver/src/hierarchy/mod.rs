@@ -148,7 +148,6 @@ pub struct HierarchyStats {
 }
 
 /// The element and cluster trees of a scene, their links, and the link operator on the leaves.
-#[derive(Clone)]
 pub struct Hierarchy {
     /// The cluster tree and the element quadtrees, their leaves the patches.
     tree: Tree,

@@ -9,7 +9,7 @@ use crate::visibility::Occluders;
 use rayon::prelude::*;
 
 /// How much of each node light can reach.
-#[derive(Clone, Default)]
+#[derive(Default)]
 pub(super) struct Reach {
     /// Per node ever a leaf, the share of its area not buried; NaN until measured.
     pub(super) seen_share: Vec<f64>,

@@ -58,7 +58,6 @@ pub(super) struct Node {
 
 /// The cluster tree over a scene's faces and the element quadtrees under them: the nodes and
 /// what sampling a cluster's surfaces needs.
-#[derive(Clone)]
 pub(super) struct Tree {
     pub(super) nodes: Vec<Node>,
     /// Input faces in cluster order: every cluster covers a contiguous run.
