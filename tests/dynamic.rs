@@ -287,6 +287,28 @@ fn a_move_that_uncovers_a_buried_patch_matches_a_fresh_computation() {
     move_matches_a_fresh_computation(PatchTarget::Count(1000));
 }
 
+/// A fresh solve of `session`'s scene and mesh as they stand, with object `light` emitting
+/// `emission`: what the session's edits must equal.
+fn solve_as_edited(
+    session: &solver::Session,
+    light: u32,
+    emission: Rgb,
+    request: &SolveRequest,
+) -> solver::Solved {
+    let mut scene = session.scene().clone();
+    scene
+        .faces
+        .iter_mut()
+        .filter(|f| f.object == light)
+        .for_each(|f| f.emission = emission);
+    let mut mesh = session.mesh().clone();
+    mesh.patches
+        .iter_mut()
+        .filter(|p| p.object == light)
+        .for_each(|p| p.emission = emission);
+    solver::solve_mesh(&scene, &mesh, request, &solver::no_progress).unwrap()
+}
+
 /// Moves the Cornell box's short block on `patches` after an emission edit, and checks the
 /// solution against form factors computed afresh on the moved mesh (to the solver's tolerance)
 /// and against the moved scene meshed anew; returns the session for more edits.
@@ -355,21 +377,8 @@ fn move_matches_a_fresh_computation(patches: PatchTarget) -> solver::Session {
     };
     // Against form factors computed afresh on the moved mesh: the update must be exact, so
     // the solutions agree to the solver's tolerance.
-    let mut dimmed = session.scene().clone();
-    dimmed
-        .faces
-        .iter_mut()
-        .filter(|f| f.object == light)
-        .for_each(|f| f.emission = Rgb::new(8.0, 6.0, 2.0));
-    let mut moved_mesh = session.mesh().clone();
-    moved_mesh
-        .patches
-        .iter_mut()
-        .filter(|p| p.object == light)
-        .for_each(|p| p.emission = Rgb::new(8.0, 6.0, 2.0));
-    let on_moved_mesh = solver::solve_mesh(&dimmed, &moved_mesh, &request, &solver::no_progress)
-        .unwrap()
-        .radiosity;
+    let on_moved_mesh =
+        solve_as_edited(&session, light, Rgb::new(8.0, 6.0, 2.0), &request).radiosity;
     assert!(
         worst(&on_moved_mesh) < 1e-5,
         "incremental and fresh form factors disagree: {}",
@@ -693,20 +702,7 @@ fn after_any_sequence_of_edits_and_moves_the_session_equals_a_fresh_solve_of_its
             };
             let report = session.solve(&solver::no_progress);
             assert!(report.converged, "step {step} ({what}): {report:?}");
-            let mut edited = session.scene().clone();
-            edited
-                .faces
-                .iter_mut()
-                .filter(|f| f.object == light)
-                .for_each(|f| f.emission = emission);
-            let mut edited_mesh = session.mesh().clone();
-            edited_mesh
-                .patches
-                .iter_mut()
-                .filter(|p| p.object == light)
-                .for_each(|p| p.emission = emission);
-            let fresh =
-                solver::solve_mesh(&edited, &edited_mesh, &request, &solver::no_progress).unwrap();
+            let fresh = solve_as_edited(&session, light, emission, &request);
             let worst = |got: &[Rgb], expected: &[Rgb]| {
                 got.iter()
                     .zip(expected)
