@@ -13,12 +13,14 @@ use crate::visibility::Occluders;
 use crate::{Limit, Progress};
 use rayon::prelude::*;
 
-/// What refinement decided for one link.
+/// What refinement decided for one link. A split carries how many times the tolerance the
+/// link's error is (infinite where the split is forced whatever the knob), so that a
+/// generation that would pass a budget can tell which splits a coarser knob would keep.
 enum Decision {
     Drop,
     Keep(Link),
-    SplitReceiver,
-    SplitSource,
+    SplitReceiver(f32),
+    SplitSource(f32),
     /// A cluster's self-link: every pair of its children.
     SplitBoth,
 }
@@ -108,8 +110,8 @@ pub(super) struct Pass<'a> {
     pub(super) round: usize,
     /// Leaves so far: the tree's, and those the generations decided since add.
     pub(super) leaves: usize,
-    /// How far over the budget this generation would have gone when it was last decided again
-    /// (the ratio of what it would make to what is allowed), if it was.
+    /// How far over the leaf budget this generation would have gone when it was last decided
+    /// again (the ratio of what it would make to what is allowed), if it was.
     pub(super) last_overshoot: Option<f64>,
     pub(super) progress: &'a (dyn Fn(Progress) + Sync),
 }
@@ -121,21 +123,28 @@ impl Pass<'_> {
         2.0 * self.knob < 1.0
     }
 
-    /// Doubles the knob, and `target` with it, saying why; to the coarsest knob at once when
-    /// the last doubling of the same generation cut its excess over the budget (`overshoot`,
+    /// Coarsens the knob, and `target` with it, saying why: by the factor a link-budget
+    /// `jump` names, or for the leaf budget by doubling, to the coarsest knob at once when the
+    /// last doubling of the same generation cut its excess over the budget (the overshoot,
     /// what it would make over what is allowed, less one) by less than a quarter: what passes
     /// the budget then hardly depends on the knob, and each doubling would decide the
-    /// generation again for little (the 125k-triangle monastery: 1.24, 1.22, 1.20 … at each).
-    fn coarsen(&mut self, target: &mut Fineness, limit: Limit, overshoot: f64) {
-        // Excess over the budget, before and after the last doubling of this generation.
-        let futile = self
-            .last_overshoot
-            .is_some_and(|last| overshoot - 1.0 > 0.75 * (last - 1.0));
-        self.last_overshoot = Some(overshoot);
-        let mut factor = 2.0;
-        while futile && 2.0 * factor * self.knob < 1.0 {
-            factor *= 2.0;
-        }
+    /// generation again for little.
+    fn coarsen(&mut self, target: &mut Fineness, limit: Limit, jump: Jump) {
+        let factor = match jump {
+            Jump::By(factor) => factor,
+            Jump::Overshoot(overshoot) => {
+                // Excess over the budget, before and after the last doubling of this generation.
+                let futile = self
+                    .last_overshoot
+                    .is_some_and(|last| overshoot - 1.0 > 0.75 * (last - 1.0));
+                self.last_overshoot = Some(overshoot);
+                let mut factor = 2.0;
+                while futile && 2.0 * factor * self.knob < 1.0 {
+                    factor *= 2.0;
+                }
+                factor
+            }
+        };
         (self.progress)(Progress::Coarsening {
             knob: self.knob,
             next_knob: factor * self.knob,
@@ -145,6 +154,17 @@ impl Pass<'_> {
         target.tolerance *= factor;
         target.smallest *= factor;
     }
+}
+
+/// How far to coarsen the knob when a generation would pass a budget.
+pub(super) enum Jump {
+    /// The leaf budget, passed by this ratio (what the generation would make over what is
+    /// allowed): doubling, unless the last doubling hardly helped.
+    Overshoot(f64),
+    /// The link budget: by this factor, from the errors of the pairs decided so far
+    /// ([`Hierarchy::coarsening_to_fit`]): deciding the generation again at each doubling had
+    /// cost the 125k-triangle monastery most of a minute.
+    By(f64),
 }
 
 /// Read-only state for deciding links in parallel.
@@ -171,7 +191,7 @@ impl Decider<'_> {
         // through a wall whose two sides share a cluster). Links end at elements, and clusters
         // only send.
         if r.element.is_none() {
-            return Decision::SplitReceiver;
+            return Decision::SplitReceiver(f32::INFINITY);
         }
         let Some(estimate) = self.factors.estimate(receiver, source) else {
             return Decision::Drop;
@@ -180,9 +200,10 @@ impl Decider<'_> {
             return Decision::Drop;
         }
         let errors = LinkErrors::new(r, self.sources.at(source), estimate.factor, estimate.spread);
+        let excess = ((errors.receiver + errors.source) / self.target.tolerance) as f32;
         match errors.end_to_split(r, s, &self.target) {
-            Some(End::Receiver) => return Decision::SplitReceiver,
-            Some(End::Source) => return Decision::SplitSource,
+            Some(End::Receiver) => return Decision::SplitReceiver(excess),
+            Some(End::Source) => return Decision::SplitSource(excess),
             None => {}
         }
         let factor = self.factors.factor(receiver, source, &estimate);
@@ -220,7 +241,7 @@ const MIN_SLICE: usize = 1 << 14;
 impl Hierarchy {
     /// Links from `pending` pairs, refined until every kept one is accurate enough; the rays
     /// and shaft decisions are added to the stats. A generation of decisions that would pass
-    /// the budget is decided again at twice the knob (`run.knob`, `target`): what is already
+    /// the budget is decided again at a coarser knob (`run.knob`, `target`; [`Jump`]): what is already
     /// refined stays, finer than the new knob asks, and nothing starts again. Where the knob
     /// can no longer coarsen, elements stop splitting at the leaf budget and pairs at the link
     /// budget (marked in the stats).
@@ -245,7 +266,7 @@ impl Hierarchy {
                         run.last_overshoot = None;
                         break decisions;
                     }
-                    Err((limit, overshoot)) => run.coarsen(target, limit, overshoot),
+                    Err((limit, jump)) => run.coarsen(target, limit, jump),
                 }
             };
             pending = self.next_generation(pending, decisions, &mut sources);
@@ -270,7 +291,7 @@ impl Hierarchy {
         occluders: &Occluders,
         rays: FormFactorSettings,
         run: &Pass,
-    ) -> Result<(Vec<Decision>, usize), (Limit, f64)> {
+    ) -> Result<(Vec<Decision>, usize), (Limit, Jump)> {
         let budget = run.budget;
         // Past the link budget no pair splits: each is kept as it is (or dropped unseen).
         let tolerance = match self.stats.link_budget_reached {
@@ -323,11 +344,9 @@ impl Hierarchy {
                 && made > budget.max_links
                 && self.links.len() as f64 + in_all(fewest) <= budget.max_links as f64
             {
-                let overshoot = in_all(made - self.links.len()) + self.links.len() as f64;
-                return Err((
-                    Limit::Links(budget.max_links),
-                    overshoot / budget.max_links as f64,
-                ));
+                let factor =
+                    self.coarsening_to_fit(pending, &decisions, budget.max_links, run.knob);
+                return Err((Limit::Links(budget.max_links), Jump::By(factor)));
             }
         }
         if frozen {
@@ -339,7 +358,7 @@ impl Hierarchy {
         }
         if run.can_coarsen() {
             let overshoot = (run.leaves + new_leaves) as f64 / budget.max_leaves as f64;
-            return Err((Limit::Leaves(budget.max_leaves), overshoot));
+            return Err((Limit::Leaves(budget.max_leaves), Jump::Overshoot(overshoot)));
         }
         // Over budget: the pairs that asked for element splits decide again without them.
         let pairs: Vec<(u32, u32)> = splits.iter().map(|&i| pending[i]).collect();
@@ -365,11 +384,11 @@ impl Hierarchy {
             match decision {
                 Decision::Drop => {}
                 Decision::Keep(link) => self.links.push(link),
-                Decision::SplitReceiver => {
+                Decision::SplitReceiver(_) => {
                     self.split_for(r, sources);
                     next.extend(self.tree.nodes[r as usize].children().map(|c| (c, s)));
                 }
-                Decision::SplitSource => {
+                Decision::SplitSource(_) => {
                     self.split_for(s, sources);
                     next.extend(self.tree.nodes[s as usize].children().map(|c| (r, c)));
                 }
@@ -408,22 +427,55 @@ impl Hierarchy {
     }
 
     /// The links or pairs `decision` on pair `(r, s)` makes: one kept link, or the pairs of
-    /// the split end's children; and the fewest it would make at any coarser knob (a cluster
-    /// that receives always splits, any other split could be kept as one link).
+    /// the split end's children; and the fewest it would make at any coarser knob (one link,
+    /// unless the split is forced, as a cluster that receives always splits).
     fn pairs_made(&self, r: u32, s: u32, decision: &Decision) -> (usize, usize) {
         let children = |n: u32| match self.tree.is_unsplit_element(n) {
             true => ELEMENT_CHILDREN,
             false => self.tree.nodes[n as usize].child_count as usize,
         };
-        let cluster_receives = self.tree.nodes[r as usize].element.is_none();
-        match decision {
+        let made = |split: usize, excess: f32| (split, if excess.is_finite() { 1 } else { split });
+        match *decision {
             Decision::Drop => (0, 0),
             Decision::Keep(_) => (1, 1),
-            Decision::SplitReceiver if cluster_receives => (children(r), children(r)),
-            Decision::SplitReceiver => (children(r), 1),
-            Decision::SplitSource => (children(s), 1),
+            Decision::SplitReceiver(excess) => made(children(r), excess),
+            Decision::SplitSource(excess) => made(children(s), excess),
             Decision::SplitBoth => (children(r) * children(r), children(r) * children(r)),
         }
+    }
+
+    /// The least power of two to coarsen the knob by (from `knob`, at most to the coarsest)
+    /// at which the `decisions` so far on `pending`, projected to the whole generation, fit
+    /// `max_links`: each split whose error is within that many tolerances kept as one link.
+    fn coarsening_to_fit(
+        &self,
+        pending: &[(u32, u32)],
+        decisions: &[Decision],
+        max_links: usize,
+        knob: f64,
+    ) -> f64 {
+        let scale = pending.len() as f64 / decisions.len() as f64;
+        let made_at = |factor: f64| -> usize {
+            pending
+                .iter()
+                .zip(decisions)
+                .map(|(&(r, s), decision)| match *decision {
+                    Decision::SplitReceiver(excess) | Decision::SplitSource(excess)
+                        if excess as f64 <= factor =>
+                    {
+                        1
+                    }
+                    _ => self.pairs_made(r, s, decision).0,
+                })
+                .sum()
+        };
+        let mut factor = 2.0;
+        while 2.0 * factor * knob < 1.0
+            && self.links.len() as f64 + made_at(factor) as f64 * scale > max_links as f64
+        {
+            factor *= 2.0;
+        }
+        factor
     }
 
     /// Which of `decisions` (for `pending`) split a leaf element, and how many leaves those
@@ -437,8 +489,8 @@ impl Hierarchy {
         let (mut indices, mut added) = (Vec::new(), 0);
         for (i, (&(r, s), decision)) in pending.iter().zip(decisions).enumerate() {
             let n = match decision {
-                Decision::SplitReceiver => r,
-                Decision::SplitSource => s,
+                Decision::SplitReceiver(_) => r,
+                Decision::SplitSource(_) => s,
                 _ => continue,
             };
             if self.tree.is_unsplit_element(n) {
