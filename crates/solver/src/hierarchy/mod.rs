@@ -78,8 +78,9 @@ pub struct HierarchySettings {
     pub max_leaves: usize,
     /// Links at most, about: the bound on memory where links per leaf run high (a model of many
     /// small faces made 85 a leaf, 4.1 GB at 354k leaves). Passing it coarsens the knob at once
-    /// by the least power of two at which the generation's pairs, by their errors, fit; past 0.5 no pair splits further ([`HierarchyStats::link_budget_reached`]), so the
-    /// last generation of pairs may add to it. About 250 bytes a link, all told
+    /// by the least power of two at which the generation's pairs, by their errors, fit; past
+    /// 0.5 no pair splits further ([`HierarchyStats::link_budget_reached`]), so the last
+    /// generation of pairs may add to it. About 250 bytes a link, all told
     /// (docs/BENCHMARKS.md).
     pub max_links: usize,
 }

@@ -241,8 +241,8 @@ const MIN_SLICE: usize = 1 << 14;
 impl Hierarchy {
     /// Links from `pending` pairs, refined until every kept one is accurate enough; the rays
     /// and shaft decisions are added to the stats. A generation of decisions that would pass
-    /// the budget is decided again at a coarser knob (`run.knob`, `target`; [`Jump`]): what is already
-    /// refined stays, finer than the new knob asks, and nothing starts again. Where the knob
+    /// the budget is decided again at a coarser knob (`run.knob`, `target`; [`Jump`]): what is
+    /// already refined stays, finer than the new knob asks, and nothing starts again. Where the knob
     /// can no longer coarsen, elements stop splitting at the leaf budget and pairs at the link
     /// budget (marked in the stats).
     pub(super) fn refine(
