@@ -16,6 +16,7 @@ use rayon::prelude::*;
 /// What refinement decided for one link. A split carries how many times the tolerance the
 /// link's error is (infinite where the split is forced whatever the knob), so that a
 /// generation that would pass a budget can tell which splits a coarser knob would keep.
+#[derive(Clone)]
 enum Decision {
     Drop,
     Keep(Link),
@@ -175,6 +176,18 @@ struct Decider<'a> {
     target: Fineness,
 }
 
+impl Decision {
+    /// Whether this decision at one knob is the decision at any coarser one: a kept link
+    /// carries no more error there, a dropped pair exchanges no light at any knob, and a
+    /// forced split (of a cluster) is forced at every knob.
+    fn stands_when_coarser(&self) -> bool {
+        match *self {
+            Decision::Keep(_) | Decision::Drop | Decision::SplitBoth => true,
+            Decision::SplitReceiver(excess) | Decision::SplitSource(excess) => excess.is_infinite(),
+        }
+    }
+}
+
 impl Decider<'_> {
     /// Keep, drop or split the link from `source` to `receiver`.
     fn decide(&self, receiver: u32, source: u32) -> Decision {
@@ -259,8 +272,10 @@ impl Hierarchy {
             if self.links.len() + pending.len() > run.budget.max_links {
                 self.stats.link_budget_reached = true;
             }
+            let mut earlier = Vec::new();
             let decisions = loop {
-                match self.decide_generation(&pending, &sources, target, occluders, rays, run) {
+                let generation = (&pending[..], &mut earlier);
+                match self.decide_generation(generation, &sources, target, occluders, rays, run) {
                     Ok((decisions, new_leaves)) => {
                         run.leaves += new_leaves;
                         run.last_overshoot = None;
@@ -282,10 +297,11 @@ impl Hierarchy {
 
     /// Decides one generation of `pending` pairs; returns the decisions and the leaves their
     /// element splits add, or, while the knob can still coarsen, the budget they would pass
-    /// and by how much (what the whole generation would make over what the budget allows).
+    /// and how far to coarsen, leaving what it decided in `earlier` (the decisions a finer
+    /// knob made for the first pairs, which the next call at a coarser knob starts from).
     fn decide_generation(
         &mut self,
-        pending: &[(u32, u32)],
+        (pending, earlier): (&[(u32, u32)], &mut Vec<Decision>),
         sources: &NodeRadiosity,
         target: &Fineness,
         occluders: &Occluders,
@@ -328,8 +344,12 @@ impl Hierarchy {
         };
         let mut decisions = Vec::with_capacity(pending.len());
         let (mut made, mut fewest) = (self.links.len(), 0);
+        // What a finer knob decided for the first pairs: a link kept or a pair dropped stands
+        // at any coarser knob, so only its splits are decided again.
+        let mut reading = std::mem::take(earlier).into_iter();
         for pairs in pending.chunks(slice) {
-            let decided = decide(self, pairs, frozen);
+            let decided =
+                decide_unless_known(pairs, &mut reading, |open| decide(self, open, frozen));
             for (&(r, s), decision) in pairs.iter().zip(&decided) {
                 let (now, coarser) = self.pairs_made(r, s, decision);
                 (made, fewest) = (made + now, fewest + coarser);
@@ -346,6 +366,7 @@ impl Hierarchy {
             {
                 let factor =
                     self.coarsening_to_fit(pending, &decisions, budget.max_links, run.knob);
+                *earlier = decisions;
                 return Err((Limit::Links(budget.max_links), Jump::By(factor)));
             }
         }
@@ -358,6 +379,7 @@ impl Hierarchy {
         }
         if run.can_coarsen() {
             let overshoot = (run.leaves + new_leaves) as f64 / budget.max_leaves as f64;
+            *earlier = decisions;
             return Err((Limit::Leaves(budget.max_leaves), Jump::Overshoot(overshoot)));
         }
         // Over budget: the pairs that asked for element splits decide again without them.
@@ -551,6 +573,31 @@ impl Hierarchy {
     }
 }
 
+/// Decisions on `pairs`: those of `earlier` (read in order, made at a finer knob) that stand
+/// at a coarser one, the rest from `decide`. The buffer of `earlier` is freed once read.
+fn decide_unless_known(
+    pairs: &[(u32, u32)],
+    earlier: &mut std::vec::IntoIter<Decision>,
+    decide: impl FnOnce(&[(u32, u32)]) -> Vec<Decision>,
+) -> Vec<Decision> {
+    if earlier.len() == 0 {
+        *earlier = Vec::new().into_iter();
+        return decide(pairs);
+    }
+    let known: Vec<Option<Decision>> = pairs
+        .iter()
+        .map(|_| earlier.next().filter(Decision::stands_when_coarser))
+        .collect();
+    let open: Vec<(u32, u32)> = (pairs.iter().zip(&known))
+        .filter(|(_, known)| known.is_none())
+        .map(|(&pair, _)| pair)
+        .collect();
+    let mut fresh = decide(&open).into_iter();
+    (known.into_iter())
+        .map(|known| known.or_else(|| fresh.next()).expect("one decision a pair"))
+        .collect()
+}
+
 /// The radiosity errors a link can carry, W/m^2.
 struct LinkErrors {
     /// `rho_R B_S dF`, from the factor's spread over the receiver: only splitting the receiver
@@ -651,6 +698,46 @@ mod tests {
             size(1)
         );
         assert!(hierarchy.tree.nodes[hierarchy.tree.face_node[1] as usize].radius > 1.0);
+    }
+
+    #[test]
+    fn only_the_splits_a_coarser_knob_may_keep_are_decided_again() {
+        let link = Link {
+            receiver: 1,
+            source: 2,
+            factor: 0.5,
+            spread: 0.0,
+            offset: [0.0; 2],
+        };
+        let earlier = vec![
+            Decision::Keep(link),
+            Decision::SplitReceiver(2.0),
+            Decision::Drop,
+            Decision::SplitSource(f32::INFINITY),
+        ];
+        let pairs: Vec<(u32, u32)> = (0..6).map(|i| (i, i + 10)).collect();
+        let mut reading = earlier.into_iter();
+        let mut asked = Vec::new();
+        let decided = decide_unless_known(&pairs[..4], &mut reading, |open| {
+            asked.extend_from_slice(open);
+            open.iter().map(|_| Decision::SplitBoth).collect()
+        });
+        assert_eq!(asked, [(1, 11)]);
+        assert!(matches!(
+            decided[..],
+            [
+                Decision::Keep(kept),
+                Decision::SplitBoth,
+                Decision::Drop,
+                Decision::SplitSource(f32::INFINITY)
+            ] if kept == link
+        ));
+        // Past what was decided before, every pair is decided afresh.
+        let rest = decide_unless_known(&pairs[4..], &mut reading, |open| {
+            assert_eq!(open, &pairs[4..]);
+            vec![Decision::Drop; open.len()]
+        });
+        assert_eq!(rest.len(), 2);
     }
 
     #[test]
