@@ -59,6 +59,7 @@ impl ProgressPrinter {
     pub(crate) fn report(&self, progress: Progress) {
         match self.throttle.admit(progress) {
             Some(ProgressLine::Warning(line)) => eprintln!("warning: {line}"),
+            Some(ProgressLine::Notice(line)) => eprintln!("{line}"),
             Some(ProgressLine::Status(line)) => {
                 eprintln!("[{:6.1}s] {line}", self.start.elapsed().as_secs_f64())
             }

@@ -63,8 +63,8 @@ fn every_solve_estimates_its_error_and_warns_when_it_is_large() {
     );
     assert!(estimate["noise"].as_f64().unwrap() > 0.0 && estimate["seconds"].as_f64().is_some());
     assert!(!quiet.contains("self-check"), "{quiet}");
-    // Twelve patches for the whole box: far off, and said so with the figure.
-    let (coarse, warned) = solve("12", &[]);
+    // Twelve dense patches for the whole box: far off, and said so with the figure.
+    let (coarse, warned) = solve("12", &["--method", "gmres"]);
     let low = coarse["estimate"]["smooth"]["low"].as_f64().unwrap();
     assert!(low > 0.05, "{}", coarse["estimate"]);
     assert!(
@@ -150,7 +150,7 @@ fn bad_input_exits_non_zero_with_the_reason() {
     let output = radcast(&["solve", "scenes/cornell-box.obj", "--method", "magic"]);
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(stderr.contains("unknown method 'magic' (expected hierarchical or one of: jacobi, gauss-seidel, progressive, gmres)"), "{stderr}");
+    assert!(stderr.contains("unknown method 'magic' (expected auto, hierarchical or one of: jacobi, gauss-seidel, progressive, gmres)"), "{stderr}");
 
     let output = radcast(&["solve", "scenes/cornell-box.obj", "--tolerance", "NaN"]);
     assert!(!output.status.success());
@@ -214,6 +214,58 @@ fn reference_writes_into_a_folder_it_creates() {
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(written["probes"].as_array().map(Vec::len), Some(3));
     std::fs::remove_dir_all(&folder).unwrap();
+}
+
+#[test]
+fn with_no_method_asked_a_solve_says_which_it_chose_and_why() {
+    // The Cornell box: 54 faces once its floor is cut around the blocks, 1,000 patches asked.
+    let (report, stderr) = radcast_json(&["solve", "scenes/cornell-box.obj", "--json"]);
+    assert!(
+        stderr.contains(
+            "method: auto chose dense gmres on 1003 patches (54 faces, at least 4 patches a face)"
+        ),
+        "{stderr}"
+    );
+    assert_eq!(report["method"], "gmres");
+    // A furnished room of 30 pieces has more faces than 1,000 patches can give 4 each.
+    let folder = tempfile::tempdir().unwrap();
+    let room = folder.path().join("room.obj");
+    radcast_ok(&[
+        "generate",
+        "--pieces",
+        "30",
+        "--out",
+        room.to_str().unwrap(),
+    ]);
+    let (report, stderr) = radcast_json(&[
+        "solve",
+        room.to_str().unwrap(),
+        "--error",
+        "0.3",
+        "--check",
+        "off",
+        "--json",
+    ]);
+    assert!(
+        stderr.contains("method: auto chose hierarchical at --error 0.3 (")
+            && stderr.contains(" patches gives fewer than 4 a face)"),
+        "{stderr}"
+    );
+    assert_eq!(report["method"], "hierarchical");
+    // Asked for by name, the method is used without a word.
+    let (report, stderr) = radcast_json(&[
+        "solve",
+        "scenes/cornell-box.obj",
+        "--method",
+        "hierarchical",
+        "--error",
+        "0.3",
+        "--check",
+        "off",
+        "--json",
+    ]);
+    assert_eq!(report["method"], "hierarchical");
+    assert!(!stderr.contains("method: auto"), "{stderr}");
 }
 
 #[test]

@@ -34,8 +34,10 @@ pub struct SolverArgs {
     #[arg(long, env = "RADCAST_PATCH_SIZE")]
     pub patch_size: Option<f64>,
     /// Solver on a uniform mesh with a dense matrix (jacobi, gauss-seidel, progressive, gmres),
-    /// or hierarchical: adaptive elements and links, solved with GMRES (--error sets accuracy).
-    #[arg(long, env = "RADCAST_METHOD", default_value = "gmres")]
+    /// hierarchical: adaptive elements and links, solved with GMRES (--error sets accuracy), or
+    /// auto: dense GMRES where --patches gives every face at least 4 patches and its matrix
+    /// fits, hierarchical otherwise (said when it runs).
+    #[arg(long, env = "RADCAST_METHOD", default_value = "auto")]
     pub method: MethodChoice,
     /// Stop when the relative residual is at most this.
     #[arg(long, env = "RADCAST_TOLERANCE", default_value_t = SolverSettings::default().tolerance)]

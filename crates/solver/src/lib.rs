@@ -100,6 +100,11 @@ pub enum Progress<'a> {
         /// The budget that was reached.
         limit: Limit,
     },
+    /// What was chosen for the user, and why (`--method auto`).
+    Notice {
+        /// What, in one sentence.
+        text: &'a str,
+    },
     /// Something the user should know before waiting for the result.
     Warning {
         /// What, in one sentence.
@@ -160,7 +165,7 @@ impl Progress<'_> {
             } => {
                 format!("refinement at error {knob} would pass {limit}: going on at {next_knob}")
             }
-            Progress::Warning { text } => text.to_string(),
+            Progress::Warning { text } | Progress::Notice { text } => text.to_string(),
             Progress::Estimate { .. } => return None,
         })
     }
@@ -183,6 +188,8 @@ pub struct ProgressThrottle {
 pub enum ProgressLine {
     /// Changes what the user gets: show it always.
     Warning(String),
+    /// What was chosen for the user: show it always, as information.
+    Notice(String),
     /// Where the computation is.
     Status(String),
 }
@@ -201,6 +208,9 @@ impl ProgressThrottle {
         let line = progress.describe()?;
         if progress.is_warning() {
             return Some(ProgressLine::Warning(line));
+        }
+        if matches!(progress, Progress::Notice { .. }) {
+            return Some(ProgressLine::Notice(line));
         }
         // Progress comes from many threads: a contended lock means a line is being shown.
         let mut last = self.last.try_lock().ok()?;

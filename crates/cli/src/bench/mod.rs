@@ -5,7 +5,7 @@ mod error_sweep;
 
 use anyhow::Context;
 use solver::args::SolverArgs;
-use solver::{HierarchySettings, SolveReport, solve_file};
+use solver::{HierarchySettings, MethodChoice, SolveReport, solve_file};
 use std::path::PathBuf;
 
 /// The arguments of `radcast bench`.
@@ -140,15 +140,19 @@ fn bench(
     repeat: usize,
     settings: &SolverArgs,
 ) -> anyhow::Result<()> {
+    // A sweep of patch counts measures the dense path: auto means its default, gmres.
+    let method = match settings.method {
+        MethodChoice::Auto => MethodChoice::Dense(solver::Method::Gmres),
+        chosen => chosen,
+    };
     println!(
-        "`radcast bench {} --counts {} --repeat {repeat} --method {}` ({} threads), medians of {repeat} runs:\n",
+        "`radcast bench {} --counts {} --repeat {repeat} --method {method}` ({} threads), medians of {repeat} runs:\n",
         scene.display(),
         counts
             .iter()
             .map(ToString::to_string)
             .collect::<Vec<_>>()
             .join(","),
-        settings.method,
         rayon::current_num_threads()
     );
     println!(
@@ -159,6 +163,7 @@ fn bench(
         let request = SolverArgs {
             patches: count,
             patch_size: None,
+            method,
             ..settings.clone()
         }
         .request(HierarchySettings::default())

@@ -33,6 +33,10 @@ pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepa
     for warning in &scene.load_warnings {
         tracing::warn!("{warning}");
     }
+    let (request, chosen) = request.for_scene(&scene);
+    if let Some(text) = chosen {
+        tracing::info!("{text}");
+    }
     let digest = crate::publish::cache::scene_digest(&scene, &request);
     let scene_id = crate::publish::cache::scene_id(&digest);
     let mesh = solver::starting_mesh(&scene, &request)?;
@@ -97,4 +101,37 @@ fn object_emissions(prepared: &Prepared) -> Vec<(String, [f64; 3])> {
         }
     }
     emissions
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use solver::{HierarchySettings, MethodChoice, PatchTarget};
+
+    #[test]
+    fn an_auto_request_is_chosen_for_the_scene_before_it_is_meshed_or_cached() {
+        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.obj");
+        let auto = |patches| {
+            SolveRequest {
+                patches: PatchTarget::Count(patches),
+                ..SolveRequest::default()
+            }
+            .with_method(MethodChoice::Auto, HierarchySettings::default())
+        };
+        let dense = prepare(&scene, auto(1000)).unwrap();
+        assert_eq!((dense.request.hierarchy, dense.request.auto), (None, false));
+        assert!(
+            dense.mesh.patches.len() > 900,
+            "{}",
+            dense.mesh.patches.len()
+        );
+        // Too few patches for 4 a face: the hierarchy, starting from one patch a face.
+        let hierarchical = prepare(&scene, auto(100)).unwrap();
+        assert!(hierarchical.request.hierarchy.is_some() && !hierarchical.request.auto);
+        assert_eq!(
+            hierarchical.mesh.patches.len(),
+            hierarchical.scene.faces.len()
+        );
+        assert_ne!(dense.digest, hierarchical.digest);
+    }
 }

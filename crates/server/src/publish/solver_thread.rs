@@ -34,7 +34,9 @@ impl ProgressLog {
     fn report(&self, progress: Progress) {
         match self.0.admit(progress) {
             Some(ProgressLine::Warning(line)) => tracing::warn!("{line}"),
-            Some(ProgressLine::Status(line)) => tracing::info!("{line}"),
+            Some(ProgressLine::Status(line) | ProgressLine::Notice(line)) => {
+                tracing::info!("{line}")
+            }
             None => {}
         }
     }

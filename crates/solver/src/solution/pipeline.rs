@@ -70,6 +70,10 @@ pub fn solve_scene(
             text: "no material emits light (no positive Ke): every radiosity is 0",
         });
     }
+    let (request, chosen) = &request.for_scene(&scene);
+    if let Some(text) = chosen {
+        progress(Progress::Notice { text });
+    }
     let start = Instant::now();
     let mesh = starting_mesh(&scene, request)?;
     let mesh_seconds = start.elapsed().as_secs_f64();
