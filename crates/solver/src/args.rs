@@ -191,9 +191,13 @@ mod tests {
     }
 
     #[test]
-    fn defaults_ask_for_the_library_defaults() {
+    fn defaults_ask_for_the_library_defaults_with_the_method_chosen_from_the_scene() {
         let request = parse(&[]).request().expect("defaults are valid");
-        assert_eq!(request, SolveRequest::default());
+        assert_eq!(
+            request,
+            SolveRequest::default().with_method(MethodChoice::Auto, HierarchySettings::default())
+        );
+        assert!(request.auto);
     }
 
     #[test]
