@@ -177,14 +177,22 @@ struct Decider<'a> {
 }
 
 impl Decision {
+    /// Whether this split would be kept as one link at a knob `factor` times coarser: its
+    /// error is within that many tolerances (never, for a forced split).
+    fn kept_when_coarser_by(&self, factor: f64) -> bool {
+        match *self {
+            Decision::SplitReceiver(excess) | Decision::SplitSource(excess) => {
+                excess.is_finite() && excess as f64 <= factor
+            }
+            Decision::Keep(_) | Decision::Drop | Decision::SplitBoth => false,
+        }
+    }
+
     /// Whether this decision at one knob is the decision at any coarser one: a kept link
     /// carries no more error there, a dropped pair exchanges no light at any knob, and a
     /// forced split (of a cluster) is forced at every knob.
     fn stands_when_coarser(&self) -> bool {
-        match *self {
-            Decision::Keep(_) | Decision::Drop | Decision::SplitBoth => true,
-            Decision::SplitReceiver(excess) | Decision::SplitSource(excess) => excess.is_infinite(),
-        }
+        !self.kept_when_coarser_by(f64::INFINITY)
     }
 }
 
@@ -456,13 +464,16 @@ impl Hierarchy {
             true => ELEMENT_CHILDREN,
             false => self.tree.nodes[n as usize].child_count as usize,
         };
-        let made = |split: usize, excess: f32| (split, if excess.is_finite() { 1 } else { split });
-        match *decision {
-            Decision::Drop => (0, 0),
-            Decision::Keep(_) => (1, 1),
-            Decision::SplitReceiver(excess) => made(children(r), excess),
-            Decision::SplitSource(excess) => made(children(s), excess),
-            Decision::SplitBoth => (children(r) * children(r), children(r) * children(r)),
+        let now = match decision {
+            Decision::Drop => 0,
+            Decision::Keep(_) => 1,
+            Decision::SplitReceiver(_) => children(r),
+            Decision::SplitSource(_) => children(s),
+            Decision::SplitBoth => children(r) * children(r),
+        };
+        match decision.kept_when_coarser_by(f64::INFINITY) {
+            true => (now, 1),
+            false => (now, now),
         }
     }
 
@@ -481,14 +492,12 @@ impl Hierarchy {
             pending
                 .iter()
                 .zip(decisions)
-                .map(|(&(r, s), decision)| match *decision {
-                    Decision::SplitReceiver(excess) | Decision::SplitSource(excess)
-                        if excess as f64 <= factor =>
-                    {
-                        1
-                    }
-                    _ => self.pairs_made(r, s, decision).0,
-                })
+                .map(
+                    |(&(r, s), decision)| match decision.kept_when_coarser_by(factor) {
+                        true => 1,
+                        false => self.pairs_made(r, s, decision).0,
+                    },
+                )
                 .sum()
         };
         let mut factor = 2.0;
