@@ -73,8 +73,9 @@ async fn compare_page_with_client(scene: &std::path::Path) {
     page.call("Emulation.setDeviceMetricsOverride", metrics)
         .await;
     let shown = page.until(
-        "d.final === 'true' && d.checksum !== '' && \
-         document.getElementById('status').textContent.includes('matches /api/solution')",
+        "d.final === 'true' && d.checksum !== '' && d.estimate !== '' && \
+         document.getElementById('status').textContent.includes('matches /api/solution') && \
+         document.getElementById('status').textContent.includes('estimated error')",
     );
     let state = tokio::time::timeout(Duration::from_secs(60), shown)
         .await
@@ -92,6 +93,14 @@ async fn compare_page_with_client(scene: &std::path::Path) {
         state["checksum"].as_str(),
         Some(current.checksum.to_string().as_str()),
         "{state}"
+    );
+    let served_estimate = shared.report.lock().unwrap().as_ref().unwrap().estimate;
+    assert_eq!(
+        state["estimate"]
+            .as_str()
+            .and_then(|e| e.parse::<f64>().ok()),
+        served_estimate.map(|e| e.smooth.rms),
+        "the status line shows the server's self-check: {state}"
     );
 
     // The same frame drawn by the headless client at the page's camera and canvas size.
@@ -282,7 +291,7 @@ impl Page {
         self.eval(&format!(
             "new Promise(done => {{ const check = () => {{ const d = document.body.dataset; \
              if ({condition}) done({{final: d.final, checksum: d.checksum, version: d.version, \
-             geometry: d.geometry, connected: d.connected}}); else setTimeout(check, 10); }}; \
+             geometry: d.geometry, connected: d.connected, estimate: d.estimate}}); else setTimeout(check, 10); }}; \
              check(); }})"
         ))
         .await

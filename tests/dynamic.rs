@@ -264,7 +264,8 @@ async fn rapid_changes_coalesce_and_the_newest_wins() {
 
 #[test]
 fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation() {
-    let mut session = move_matches_a_fresh_computation(request().patches);
+    let shift = glam::dvec3(40.0, 0.0, -30.0);
+    let mut session = move_matches_a_fresh_computation(request().patches, shift.into());
     // Unknown objects and non-finite offsets are refused.
     let offset = glam::dvec3(40.0, 0.0, -30.0);
     assert_eq!(
@@ -284,7 +285,35 @@ fn moving_an_object_updates_only_what_it_affects_and_matches_a_fresh_computation
 /// and the server served the old light as final).
 #[test]
 fn a_move_that_uncovers_a_buried_patch_matches_a_fresh_computation() {
-    move_matches_a_fresh_computation(PatchTarget::Count(1000));
+    move_matches_a_fresh_computation(
+        PatchTarget::Count(1000),
+        glam::dvec3(40.0, 0.0, -30.0).into(),
+    );
+}
+
+/// A rotation about the block's own centre, and one about a pivot on the floor with a
+/// translation after it: each the same as the scene turned before meshing.
+#[test]
+fn rotating_an_object_matches_a_fresh_computation() {
+    let turn = |degrees| {
+        Some(solver::Rotation {
+            axis: [0.0, 1.0, 0.0],
+            degrees,
+        })
+    };
+    for motion in [
+        solver::Motion {
+            rotate: turn(37.0),
+            ..Default::default()
+        },
+        solver::Motion {
+            rotate: turn(-90.0),
+            pivot: Some([278.0, 0.0, 279.0]),
+            translate: [0.0, 0.0, 20.0],
+        },
+    ] {
+        move_matches_a_fresh_computation(request().patches, motion);
+    }
 }
 
 /// A fresh solve of `session`'s scene and mesh as they stand, with object `light` emitting
@@ -309,10 +338,13 @@ fn solve_as_edited(
     solver::solve_mesh(&scene, &mesh, request, &solver::no_progress).unwrap()
 }
 
-/// Moves the Cornell box's short block on `patches` after an emission edit, and checks the
-/// solution against form factors computed afresh on the moved mesh (to the solver's tolerance)
-/// and against the moved scene meshed anew; returns the session for more edits.
-fn move_matches_a_fresh_computation(patches: PatchTarget) -> solver::Session {
+/// Moves the Cornell box's short block by `motion` on `patches` after an emission edit, and
+/// checks the solution against form factors computed afresh on the moved mesh (to the solver's
+/// tolerance) and against the moved scene meshed anew; returns the session for more edits.
+fn move_matches_a_fresh_computation(
+    patches: PatchTarget,
+    motion: solver::Motion,
+) -> solver::Session {
     // A tight tolerance, so warm and cold solves agree closely even on dim patches.
     let mut request = SolveRequest {
         patches,
@@ -327,8 +359,7 @@ fn move_matches_a_fresh_computation(patches: PatchTarget) -> solver::Session {
         .set_emission("light", Rgb::new(8.0, 6.0, 2.0))
         .unwrap();
     session.solve(&solver::no_progress);
-    let offset = glam::dvec3(40.0, 0.0, -30.0);
-    let moved = session.move_object("short_block", offset).unwrap();
+    let moved = session.move_object("short_block", motion).unwrap();
     let MoveWork::Dense(work) = moved.work else {
         panic!("a dense session updates its matrix: {moved:?}")
     };
@@ -347,7 +378,8 @@ fn move_matches_a_fresh_computation(patches: PatchTarget) -> solver::Session {
         .iter()
         .position(|o| o.name == "light")
         .unwrap() as u32;
-    fresh_scene.translate_object(block, offset);
+    let centre = fresh_scene.object_centre(block);
+    fresh_scene.move_object(block, &motion.affine(centre));
     fresh_scene
         .faces
         .iter_mut()
@@ -407,6 +439,32 @@ fn move_matches_a_fresh_computation(patches: PatchTarget) -> solver::Session {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn moving_an_object_sends_new_geometry_and_colours_of_the_moved_scene() {
+    let turn = solver::Motion {
+        translate: [40.0, 0.0, -30.0],
+        rotate: Some(solver::Rotation {
+            axis: [0.0, 1.0, 0.0],
+            degrees: 90.0,
+        }),
+        pivot: None,
+    };
+    for (body, motion) in [
+        (
+            r#"{"translate": [40, 0, -30]}"#,
+            glam::dvec3(40.0, 0.0, -30.0).into(),
+        ),
+        (
+            r#"{"rotate": {"axis": [0, 1, 0], "degrees": 90}, "translate": [40, 0, -30]}"#,
+            turn,
+        ),
+    ] {
+        move_over_http(body, motion).await;
+    }
+}
+
+/// PUTs `body` to move the Cornell box's short block on a live server, and checks what a
+/// viewer gets against `motion` applied to the scene: the block's corners moved and nothing
+/// else, and the colours of the moved scene.
+async fn move_over_http(body: &str, motion: solver::Motion) {
     let (address, _, _edit_loop) = live_cornell().await;
     let mut viewer = Viewer::connect(address).await;
     viewer.wait_for(|_| true).await;
@@ -421,7 +479,7 @@ async fn moving_an_object_sends_new_geometry_and_colours_of_the_moved_scene() {
         address,
         "/api/objects/short_block/transform",
         Some(TOKEN),
-        r#"{"translate": [40, 0, -30]}"#,
+        body,
     )
     .await;
     assert_eq!(status, 202, "{body}");
@@ -451,9 +509,12 @@ async fn moving_an_object_sends_new_geometry_and_colours_of_the_moved_scene() {
                 .filter(|c| *c != wire::geometry::NO_CORNER)
         })
         .collect();
+    let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+    let affine = motion.affine(scene.object_centre(block));
     for (i, (a, b)) in before.positions.iter().zip(&after.positions).enumerate() {
         let expected = if block_corners.contains(&(i as u32)) {
-            [a[0] + 40.0, a[1], a[2] - 30.0]
+            let moved = affine.transform_point3(glam::Vec3::from(*a).as_dvec3());
+            moved.as_vec3().to_array()
         } else {
             *a
         };
@@ -463,11 +524,10 @@ async fn moving_an_object_sends_new_geometry_and_colours_of_the_moved_scene() {
         );
     }
     // The colours are those of the moved scene.
-    let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
     let mut mesh = solver::Mesh::build(&scene, request().patches);
     let mut moved_scene = scene.clone();
-    moved_scene.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
-    mesh.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
+    moved_scene.move_object(block, &affine);
+    mesh.move_object(block, &affine);
     let expected: Vec<[f32; 3]> =
         solver::solve_mesh(&moved_scene, &mesh, &request(), &solver::no_progress)
             .unwrap()
@@ -529,7 +589,10 @@ async fn a_hierarchical_server_streams_its_leaves_and_new_leaves_after_a_move() 
         .iter()
         .position(|o| o.name == "short_block")
         .unwrap() as u32;
-    moved.translate_object(block, glam::dvec3(40.0, 0.0, -30.0));
+    moved.move_object(
+        block,
+        &glam::DAffine3::from_translation(glam::dvec3(40.0, 0.0, -30.0)),
+    );
     let (vertices, expected) = solve(moved);
     let (geometry, scene_version, summary) = tokio::task::spawn_blocking(move || {
         let base = format!("http://{address}");
@@ -626,7 +689,15 @@ async fn an_edit_the_solver_refuses_is_reported_and_the_next_edit_still_applies(
             .flatten()
             .all(|c| c.is_finite())
     );
-    assert_eq!(get_text(address, "/healthz").await, (200, "ok\n".into()));
+    // The refusal is cleared. What may stay is the self-check's verdict on the box with its
+    // tall block 9e29 away: at that spread, visibility in f32 does not resolve the box.
+    assert!(!shared.health.has(Fault::Edit));
+    let (status, health) = get_text(address, "/healthz").await;
+    assert_eq!(status, 200);
+    assert!(
+        health == "ok\n" || health.starts_with("degraded: the self-check estimates "),
+        "{health}"
+    );
 }
 
 /// A seeded stream of numbers in [0, 1) (splitmix64): the edits of the property test below.
@@ -645,7 +716,7 @@ impl Draws {
 #[test]
 fn after_any_sequence_of_edits_and_moves_the_session_equals_a_fresh_solve_of_its_scene() {
     // Random sequences of emission edits (the light off among them) and moves of either block
-    // (each kept within 60 mm of where it started), on the Cornell box at 300 patches and at
+    // (each kept within 60 mm of where it started, half of them turning it about its centre), on the Cornell box at 300 patches and at
     // the default 1,000: after each solve, the patch and vertex values equal a solve from
     // scratch of the scene as edited, on the same mesh.
     // What the sequences did, so that a change of seeds cannot leave a kind of edit untried.
@@ -695,10 +766,23 @@ fn after_any_sequence_of_edits_and_moves_the_session_equals_a_fresh_solve_of_its
                     0.0,
                     120.0 * draws.next() - 60.0,
                 );
-                session.move_object(name, target - moved[block]).unwrap();
+                // Half the moves turn the block about its centre on the way.
+                let rotate = (draws.next() < 0.5).then(|| solver::Rotation {
+                    axis: [0.0, 1.0, 0.0],
+                    degrees: 360.0 * draws.next() - 180.0,
+                });
+                let motion = solver::Motion {
+                    translate: (target - moved[block]).to_array(),
+                    rotate,
+                    pivot: None,
+                };
+                session.move_object(name, motion).unwrap();
                 moved[block] = target;
                 tried.insert(name);
-                format!("{name} to {target}")
+                if rotate.is_some() {
+                    tried.insert("rotation");
+                }
+                format!("{name}: {motion}")
             };
             let report = session.solve(&solver::no_progress);
             assert!(report.converged, "step {step} ({what}): {report:?}");
@@ -728,6 +812,12 @@ fn after_any_sequence_of_edits_and_moves_the_session_equals_a_fresh_solve_of_its
     }
     assert_eq!(
         tried.into_iter().collect::<Vec<_>>(),
-        ["light", "light off", "short_block", "tall_block"]
+        [
+            "light",
+            "light off",
+            "rotation",
+            "short_block",
+            "tall_block"
+        ]
     );
 }

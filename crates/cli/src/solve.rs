@@ -3,7 +3,7 @@
 use crate::{HEAP, ProgressPrinter};
 use anyhow::Context;
 use solver::accuracy::evaluate;
-use solver::args::{SolveArgs, budget_warnings};
+use solver::args::{Check, SolveArgs, budget_warnings};
 use solver::check::{CheckSettings, Estimate, ReadingEstimate, self_check};
 use solver::reference::Reference;
 use solver::visibility::Occluders;
@@ -30,20 +30,6 @@ pub struct SolveCommand {
     pub check: Check,
 }
 
-/// Whether `radcast solve` checks its answer.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Check {
-    On,
-    Off,
-}
-
-/// The smooth RMS error past which the self-check's lower bound is a warning.
-const CHECK_WARNING: f64 = 0.05;
-/// The share of the solve's time the self-check may take past its first probes, and the most
-/// probes it traces.
-const CHECK_SHARE: f64 = 0.1;
-const CHECK_PROBES: usize = 1024;
-
 impl SolveCommand {
     /// Runs the command.
     pub fn run(self) -> anyhow::Result<()> {
@@ -64,7 +50,9 @@ impl SolveCommand {
                     .with_context(|| format!("{}: not a radcast reference", path.display()))
             })
             .transpose()?;
-        let solved = solve_file(&scene, &request, &|p| printer.report(p))?;
+        let mut solved = solve_file(&scene, &request, &|p| printer.report(p))?;
+        // The bar goes before the summary is printed.
+        drop(printer);
         let measured = reference.map(|r| {
             evaluate(
                 &solved.scene,
@@ -74,27 +62,18 @@ impl SolveCommand {
                 &r.probes,
             )
         });
-        let estimate = (check == Check::On).then(|| {
+        solved.report.estimate = (check == Check::On).then(|| {
             self_check(
                 &solved.scene,
                 &Occluders::new(&solved.scene),
                 &solved.mesh,
                 (&solved.radiosity, &solved.vertex_radiosity),
-                &CheckSettings {
-                    probes: CHECK_PROBES,
-                    seconds: Some(CHECK_SHARE * solved.report.seconds.total),
-                    ..CheckSettings::default()
-                },
+                &CheckSettings::after_solve(solved.report.seconds.total),
             )
         });
         let report = &solved.report;
-        if let Some(e) = estimate.filter(|e| e.smooth.low > CHECK_WARNING) {
-            eprintln!(
-                "warning: the self-check estimates {:.1}% smooth RMS error (at least {:.1}%), past {}%: refine further (a smaller --error or more --patches)",
-                100.0 * e.smooth.rms,
-                100.0 * e.smooth.low,
-                100.0 * CHECK_WARNING
-            );
+        if let Some(warning) = report.estimate.as_ref().and_then(Estimate::warning) {
+            eprintln!("warning: {warning}");
         }
         for warning in &report.warnings {
             eprintln!("warning: {warning}");
@@ -123,12 +102,9 @@ impl SolveCommand {
             if let Some(measured) = measured {
                 value["error"] = serde_json::to_value(measured)?;
             }
-            if let Some(estimate) = estimate {
-                value["estimate"] = serde_json::to_value(estimate)?;
-            }
             println!("{value}");
         } else {
-            print_summary(&scene, report, estimate.as_ref());
+            print_summary(&scene, report);
             if let Some(e) = measured {
                 println!(
                     "error       smooth RMS {:.4}, max {:.3}, energy {:+.4}; flat RMS {:.4}  ({} probes, reference noise {:.4})",
@@ -145,7 +121,7 @@ impl SolveCommand {
     }
 }
 
-fn print_summary(scene: &std::path::Path, r: &SolveReport, estimate: Option<&Estimate>) {
+fn print_summary(scene: &std::path::Path, r: &SolveReport) {
     let s = &r.seconds;
     println!(
         "scene       {} ({} objects, {} triangles)",
@@ -176,7 +152,7 @@ fn print_summary(scene: &std::path::Path, r: &SolveReport, estimate: Option<&Est
         "seconds     load {:.3}  mesh {:.3}  form factors {:.3}  solve {:.3}  total {:.3}",
         s.load, s.mesh, s.form_factors, s.solve, s.total
     );
-    if let Some(e) = estimate {
+    if let Some(e) = &r.estimate {
         let percent = |r: &ReadingEstimate| {
             format!(
                 "{:.1}% ({:.1}-{:.1}%), energy {:+.1}%",

@@ -15,6 +15,9 @@ pub enum Fault {
     /// The last solve stopped short of its tolerance (the iteration limit, or a breakdown):
     /// the frames served are not final.
     NotConverged,
+    /// The self-check says the answer served is off by more than the warning level, even at
+    /// the low end of its interval; cleared by a check that says otherwise.
+    Inaccurate,
     /// The solver thread ended: edits can no longer be applied. Never cleared.
     SolverStopped,
     /// NATS could not be reached or refused a write (origin: publishing; edge: reading).
@@ -28,10 +31,11 @@ pub enum Fault {
 
 impl Fault {
     /// Every kind, in `/metrics` order.
-    pub const ALL: [Fault; 7] = [
+    pub const ALL: [Fault; 8] = [
         Fault::Edit,
         Fault::CacheWrite,
         Fault::NotConverged,
+        Fault::Inaccurate,
         Fault::SolverStopped,
         Fault::Nats,
         Fault::OriginSilent,
@@ -44,6 +48,7 @@ impl Fault {
             Fault::Edit => "edit",
             Fault::CacheWrite => "cache_write",
             Fault::NotConverged => "not_converged",
+            Fault::Inaccurate => "inaccurate",
             Fault::SolverStopped => "solver_stopped",
             Fault::Nats => "nats",
             Fault::OriginSilent => "origin_silent",

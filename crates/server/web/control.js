@@ -1,5 +1,5 @@
 // The control panel: with the bearer token typed in (kept in this page's memory only, never in
-// the URL or storage), set each emitter's colour and intensity and move objects, through the
+// the URL or storage), set each emitter's colour and intensity and move and turn objects, through the
 // control API (PUT /api/objects/NAME/emission and /transform). Every open page follows the
 // result through its own stream.
 
@@ -23,6 +23,7 @@ function join(hex, intensity) {
   return [1, 3, 5].map((i) => toLinear(parseInt(hex.slice(i, i + 2), 16) / 255) * intensity);
 }
 
+/** PUTs `{[what]: value}`: `emission` to the object's emission, `translate` or `rotate` to its transform. */
 async function put(name, what, value) {
   const response = await fetch(`api/objects/${encodeURIComponent(name)}/${what === "emission" ? "emission" : "transform"}`, {
     method: "PUT",
@@ -54,6 +55,12 @@ export async function showControls(sceneRadius) {
     for (const [label, offset] of [["−x", [-1, 0, 0]], ["+x", [1, 0, 0]], ["−y", [0, -1, 0]], ["+y", [0, 1, 0]], ["−z", [0, 0, -1]], ["+z", [0, 0, 1]]]) {
       const button = Object.assign(document.createElement("button"), { type: "button", textContent: label });
       button.onclick = () => put(name, "translate", offset.map((o) => o * step));
+      move.append(button);
+    }
+    // Turns about the object's centre, 15 degrees about the vertical (the scene's y).
+    for (const [label, degrees] of [["⟲", 15], ["⟳", -15]]) {
+      const button = Object.assign(document.createElement("button"), { type: "button", textContent: label, title: `rotate ${degrees}° about y` });
+      button.onclick = () => put(name, "rotate", { axis: [0, 1, 0], degrees });
       move.append(button);
     }
   }

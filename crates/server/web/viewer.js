@@ -26,6 +26,8 @@ const state = {
   bytes: 0,
   latencyMs: null,
   serverChecksum: null,
+  // The self-check's smooth reading ({rms, low, high}) from /api/solution, once there is one.
+  estimate: null,
   connected: false,
   camera: null, // {target, offset (eye - target), up, fov, radius}
   emitting: [], // per object of the geometry: whether it emits now (left out of the exposure)
@@ -258,6 +260,9 @@ function draw() {
   }
 }
 
+/** A ratio as a percentage with one decimal. */
+const percent = (ratio) => `${(100 * ratio).toFixed(1)}%`;
+
 function showStatus() {
   const info = state.buffer.info;
   const local = info ? checksum(state.buffer.colours) : null;
@@ -269,7 +274,9 @@ function showStatus() {
     `${(state.bytes / 1024).toFixed(1)} KiB received`,
     state.latencyMs === null ? "" : `latency ${state.latencyMs.toFixed(0)} ms`,
     local === null ? "" : `checksum ${local.toString(16).padStart(8, "0")}${verified}`,
+    state.estimate === null ? "" : `estimated error ${percent(state.estimate.rms)} (${percent(state.estimate.low)}–${percent(state.estimate.high)})`,
   ].filter(Boolean).join(" · ");
+  document.body.dataset.estimate = state.estimate === null ? "" : String(state.estimate.rms);
   document.body.dataset.checksum = local === null ? "" : String(local);
   document.body.dataset.final = info && info.isFinal ? "true" : "false";
   document.body.dataset.version = info ? String(info.solutionVersion) : "";
@@ -301,6 +308,7 @@ async function checkWithServer() {
   if (await fetchEmitting()) uploadColours();
   const summary = await (await fetch("api/solution")).json();
   state.serverChecksum = state.buffer.info && BigInt(summary.solution_version) === state.buffer.info.solutionVersion ? summary.checksum : null;
+  state.estimate = summary.report && summary.report.estimate ? summary.report.estimate.smooth : null;
   showStatus();
 }
 

@@ -70,6 +70,15 @@ pub struct HierarchyArgs {
     pub max_links: usize,
 }
 
+/// Whether a solve checks its answer (see [`crate::check`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Check {
+    /// Estimate the error against probes path-traced for it, after the solve.
+    On,
+    /// Skip the check.
+    Off,
+}
+
 impl SolveArgs {
     /// The request these flags ask for, or the first flag whose value is out of range.
     pub fn request(&self) -> Result<SolveRequest, String> {

@@ -40,6 +40,26 @@ impl Default for CheckSettings {
     }
 }
 
+impl CheckSettings {
+    /// The check run after a solve that took `solve_seconds`: up to [`AFTER_SOLVE_PROBES`]
+    /// probes, as many past the first [`FIRST_PROBES`] as [`AFTER_SOLVE_SHARE`] of the solve's
+    /// time allows.
+    pub fn after_solve(solve_seconds: f64) -> Self {
+        CheckSettings {
+            probes: AFTER_SOLVE_PROBES,
+            seconds: Some(AFTER_SOLVE_SHARE * solve_seconds),
+            ..CheckSettings::default()
+        }
+    }
+}
+
+/// The share of a solve's time the check after it may take past its first probes.
+pub const AFTER_SOLVE_SHARE: f64 = 0.1;
+/// The most probes the check after a solve traces.
+pub const AFTER_SOLVE_PROBES: usize = 1024;
+/// The smooth RMS error past which a check's lower bound says the answer is bad.
+pub const WARN_ABOVE: f64 = 0.05;
+
 /// Probes the check always traces: its interval is already within a few points of the RMS
 /// there (the plates: ±0.4% at 10%).
 pub const FIRST_PROBES: usize = 64;
@@ -70,6 +90,26 @@ pub struct Estimate {
     pub probes: usize,
     /// Seconds the check took.
     pub seconds: f64,
+}
+
+impl Estimate {
+    /// What to tell the user when the check says the answer is bad (see [`warning`]).
+    pub fn warning(&self) -> Option<String> {
+        warning(self.smooth.rms, self.smooth.low)
+    }
+}
+
+/// What to tell the user about an answer whose relative smooth RMS error is estimated at
+/// `rms`, at least `low`: a warning when even `low` is past [`WARN_ABOVE`].
+pub fn warning(rms: f64, low: f64) -> Option<String> {
+    (low > WARN_ABOVE).then(|| {
+        format!(
+            "the self-check estimates {:.1}% smooth RMS error (at least {:.1}%), past {}%: refine further (a smaller --error or more --patches)",
+            100.0 * rms,
+            100.0 * low,
+            100.0 * WARN_ABOVE
+        )
+    })
 }
 
 /// Estimates the error of a solution of `scene` on `mesh`: `radiosity` per patch, `corners`

@@ -4,7 +4,7 @@
 //! Everything here is in f64 and uses only tolerances relative to the sizes involved, so a scene
 //! gives the same answer in millimetres or in kilometres.
 
-use glam::DVec3;
+use glam::{DAffine3, DVec3};
 use std::f64::consts::PI;
 
 /// A convex planar polygon with three or four corners, counter-clockwise seen from its front
@@ -33,10 +33,10 @@ impl Polygon {
         }
     }
 
-    /// The same polygon moved by `offset`.
-    pub fn translated(&self, offset: DVec3) -> Polygon {
+    /// The same polygon moved rigidly by `motion`.
+    pub fn moved(&self, motion: &DAffine3) -> Polygon {
         Polygon {
-            corners: self.corners.map(|c| c + offset),
+            corners: self.corners.map(|c| motion.transform_point3(c)),
             arity: self.arity,
         }
     }

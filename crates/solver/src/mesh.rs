@@ -5,7 +5,7 @@
 
 use crate::geometry::Polygon;
 use crate::scene::{Rgb, Scene};
-use glam::DVec3;
+use glam::{DAffine3, DVec3};
 
 /// How finely to mesh.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -154,15 +154,17 @@ impl Mesh {
             .collect()
     }
 
-    /// Moves every patch of `object` (and the corners they use) by `offset`.
-    pub fn translate_object(&mut self, object: u32, offset: DVec3) {
+    /// Moves every patch of `object` (and the corners they use) rigidly by `motion`.
+    pub fn move_object(&mut self, object: u32, motion: &DAffine3) {
         let mut moved = vec![false; self.positions.len()];
         for patch in self.patches.iter_mut().filter(|p| p.object == object) {
-            patch.polygon = patch.polygon.translated(offset);
-            patch.centroid += offset;
+            patch.polygon = patch.polygon.moved(motion);
+            patch.centroid = motion.transform_point3(patch.centroid);
+            patch.normal = motion.transform_vector3(patch.normal);
             for &c in &patch.corners[..patch.polygon.corners().len()] {
                 if !std::mem::replace(&mut moved[c as usize], true) {
-                    self.positions[c as usize] += offset;
+                    self.positions[c as usize] =
+                        motion.transform_point3(self.positions[c as usize]);
                 }
             }
         }

@@ -57,6 +57,10 @@ pub struct SolveReport {
     /// Elements and links, for the hierarchical method (absent otherwise).
     #[serde(flatten, default, skip_serializing_if = "Option::is_none")]
     pub hierarchy: Option<HierarchyCounts>,
+    /// The self-check of the answer now served: of the last solve or move (an emission edit
+    /// keeps it); absent when the check is off.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimate: Option<ErrorEstimate>,
 }
 
 /// Wall-clock seconds per stage of a solve.
@@ -107,4 +111,33 @@ pub struct HierarchyCounts {
     /// Whether refinement stopped at the link budget (absent from servers before it existed).
     #[serde(default)]
     pub link_budget_reached: bool,
+}
+
+/// A solution's error estimated against probes path-traced for it, the tracing's noise taken
+/// out: what `radcast solve` prints as `estimate`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ErrorEstimate {
+    /// What viewers see: values interpolated from the vertices.
+    pub smooth: ReadingError,
+    /// Patch values.
+    pub flat: ReadingError,
+    /// The tracing's own relative RMS noise, taken out of both.
+    pub noise: f64,
+    /// Probes that counted.
+    pub probes: usize,
+    /// Seconds the check took.
+    pub seconds: f64,
+}
+
+/// One reading's estimated error, relative to the RMS radiosity at the probes.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReadingError {
+    /// The relative RMS error.
+    pub rms: f64,
+    /// The low end of its interval (three standard errors).
+    pub low: f64,
+    /// The high end of its interval.
+    pub high: f64,
+    /// `sum B / sum B_traced - 1` over the probes: the energy balance.
+    pub energy: f64,
 }

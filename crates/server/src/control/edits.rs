@@ -1,6 +1,7 @@
 //! Scene edits from the control API, coalesced: for each object only the newest emission is
 //! kept, so changes that arrive faster than solves never queue up.
 
+use solver::Motion;
 use std::collections::BTreeMap;
 use std::sync::{Condvar, Mutex};
 use tokio::sync::watch;
@@ -35,8 +36,10 @@ struct Pending {
 pub struct Batch {
     /// The newest emission per object.
     pub emissions: BTreeMap<String, [f64; 3]>,
-    /// The summed translation per object (translations compose by adding).
-    pub moves: BTreeMap<String, [f64; 3]>,
+    /// The moves per object in the order they came, translations that follow one another
+    /// summed (they compose by adding; a rotation turns about the centre the object has when
+    /// it applies, so it stays a step of its own). Moves of different objects commute.
+    pub moves: BTreeMap<String, Vec<Motion>>,
 }
 
 impl Batch {
@@ -53,15 +56,16 @@ impl Edits {
         self.wake.notify_one();
     }
 
-    /// Adds a translation of `object` to any not yet applied.
-    pub fn move_object(&self, object: &str, offset: [f64; 3]) {
+    /// Queues a move of `object` after any not yet applied.
+    pub fn move_object(&self, object: &str, motion: Motion) {
         let mut pending = self.pending.lock().expect("edits lock");
-        let total = pending
-            .batch
-            .moves
-            .entry(object.to_string())
-            .or_insert([0.0; 3]);
-        (0..3).for_each(|k| total[k] += offset[k]);
+        let moves = pending.batch.moves.entry(object.to_string()).or_default();
+        match moves.last_mut() {
+            Some(last) if last.is_translation() && motion.is_translation() => {
+                (0..3).for_each(|k| last.translate[k] += motion.translate[k]);
+            }
+            _ => moves.push(motion),
+        }
         self.wake.notify_one();
     }
 
@@ -114,12 +118,25 @@ mod tests {
             edits.set_emission("light", [level as f64; 3]);
         }
         edits.set_emission("wall", [1.0, 0.0, 0.0]);
-        edits.move_object("box", [1.0, 2.0, 0.0]);
-        edits.move_object("box", [0.5, 0.0, -1.0]);
+        let shift = |x, y, z| Motion::from(glam::DVec3::new(x, y, z));
+        let turn = Motion {
+            rotate: Some(solver::Rotation {
+                axis: [0.0, 1.0, 0.0],
+                degrees: 90.0,
+            }),
+            ..Motion::default()
+        };
+        edits.move_object("box", shift(1.0, 2.0, 0.0));
+        edits.move_object("box", shift(0.5, 0.0, -1.0));
+        edits.move_object("box", turn);
+        edits.move_object("box", shift(1.0, 0.0, 0.0));
         let batch = edits.wait().expect("edits");
         assert_eq!(batch.emissions.len(), 2);
         assert_eq!(batch.emissions["light"], [99.0; 3]);
-        assert_eq!(batch.moves["box"], [1.5, 2.0, -1.0]);
+        assert_eq!(
+            batch.moves["box"],
+            [shift(1.5, 2.0, -1.0), turn, shift(1.0, 0.0, 0.0)]
+        );
         assert_eq!(edits.pending(), 0);
         edits.close();
         assert_eq!(edits.wait(), None);

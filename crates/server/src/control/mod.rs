@@ -1,5 +1,5 @@
-//! The control API as plain functions: check the token, parse `{"FIELD": [a, b, c]}`, queue
-//! the edit. The HTTP route calls [`apply`] on the origin; on an edge the same request travels
+//! The control API as plain functions: check the token, parse the edit's JSON, queue the
+//! edit. The HTTP route calls [`apply`] on the origin; on an edge the same request travels
 //! over NATS and the origin's responder ([`crate::fanout::origin`]) calls [`apply`], so a
 //! request gets the same answer wherever it is sent.
 
@@ -14,12 +14,14 @@ use axum::response::{IntoResponse, Response};
 pub enum Field {
     /// `PUT /api/objects/{name}/emission` with `{"emission": [r, g, b]}` (W/m^2).
     Emission,
-    /// `PUT /api/objects/{name}/transform` with `{"translate": [x, y, z]}` (scene units).
+    /// `PUT /api/objects/{name}/transform` with `{"translate": [x, y, z]}` and/or
+    /// `{"rotate": {"axis": [x, y, z], "degrees": d}}`, `"pivot": [x, y, z]` optional (scene
+    /// units; [`solver::Motion`]).
     Move,
 }
 
 impl Field {
-    /// The JSON key of the body.
+    /// The field's name where a request travels between servers (an edge's forwarding).
     pub fn key(self) -> &'static str {
         match self {
             Field::Emission => "emission",
@@ -27,20 +29,21 @@ impl Field {
         }
     }
 
-    /// The field whose JSON key is `key`.
+    /// The field whose name is `key`.
     pub fn from_key(key: &str) -> Option<Field> {
         [Field::Emission, Field::Move]
             .into_iter()
             .find(|f| f.key() == key)
     }
+}
 
-    /// The solver's rule for the values.
-    fn check(self) -> fn([f64; 3]) -> Result<(), String> {
-        match self {
-            Field::Emission => solver::check_emission,
-            Field::Move => solver::check_translation,
-        }
-    }
+/// A checked edit, ready to queue.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Edit {
+    /// A new emission, W/m^2.
+    Emission([f64; 3]),
+    /// A rigid move.
+    Move(solver::Motion),
 }
 
 /// A control request's answer: its status and JSON body.
@@ -91,35 +94,48 @@ pub fn authorized(authorization: Option<&str>, token: &str) -> bool {
             == 0
 }
 
-/// Checks an edit: the object exists and the body is `{"FIELD": [a, b, c]}` with values the
-/// solver's rule for the field accepts. Returns the triple or the refusal.
+/// Checks an edit: the object exists and the body is the field's JSON (see [`Field`]) with
+/// values the solver's rule for it accepts. Returns the edit or the refusal.
 pub fn parse_edit(
     objects: &[String],
     name: &str,
     body: &[u8],
     field: Field,
-) -> Result<[f64; 3], Reply> {
+) -> Result<Edit, Reply> {
     if !objects.iter().any(|o| o == name) {
         return Err(Reply::refusal(
             StatusCode::NOT_FOUND,
             format!("no object named '{name}'"),
         ));
     }
-    let key = field.key();
-    let shape = || format!("body must be JSON like {{\"{key}\": [a, b, c]}}");
-    let value: serde_json::Value = serde_json::from_slice(body)
-        .map_err(|e| Reply::refusal(StatusCode::BAD_REQUEST, format!("{}: {e}", shape())))?;
-    let object = value
-        .as_object()
-        .filter(|o| o.len() == 1)
-        .ok_or_else(|| Reply::refusal(StatusCode::BAD_REQUEST, shape()))?;
-    let triple: [f64; 3] = object
-        .get(key)
-        .and_then(|v| serde_json::from_value(v.clone()).ok())
-        .ok_or_else(|| Reply::refusal(StatusCode::BAD_REQUEST, shape()))?;
-    field.check()(triple)
-        .map_err(|rule| Reply::refusal(StatusCode::BAD_REQUEST, format!("{key} {rule}")))?;
-    Ok(triple)
+    let bad = |reason: String| Reply::refusal(StatusCode::BAD_REQUEST, reason);
+    match field {
+        Field::Emission => {
+            let shape = || "body must be JSON like {\"emission\": [a, b, c]}".to_string();
+            let value: serde_json::Value =
+                serde_json::from_slice(body).map_err(|e| bad(format!("{}: {e}", shape())))?;
+            let triple: [f64; 3] = value
+                .as_object()
+                .filter(|o| o.len() == 1)
+                .and_then(|o| o.get("emission"))
+                .and_then(|v| serde_json::from_value(v.clone()).ok())
+                .ok_or_else(|| bad(shape()))?;
+            solver::check_emission(triple).map_err(|rule| bad(format!("emission {rule}")))?;
+            Ok(Edit::Emission(triple))
+        }
+        Field::Move => {
+            let shape = "body must be JSON like {\"translate\": [x, y, z]} and/or {\"rotate\": {\"axis\": [x, y, z], \"degrees\": d}}, with \"pivot\": [x, y, z] optional";
+            let motion: solver::Motion =
+                serde_json::from_slice(body).map_err(|e| bad(format!("{shape}: {e}")))?;
+            let named = serde_json::from_slice::<serde_json::Value>(body)
+                .is_ok_and(|v| v.get("translate").is_some() || v.get("rotate").is_some());
+            if !named {
+                return Err(bad(shape.to_string()));
+            }
+            motion.check().map_err(bad)?;
+            Ok(Edit::Move(motion))
+        }
+    }
 }
 
 /// Checks the token and the edit and queues it for the solver thread.
@@ -137,13 +153,25 @@ pub fn apply(
         return Reply::refusal(StatusCode::SERVICE_UNAVAILABLE, why);
     }
     match parse_edit(&shared.hub.geometry().model.objects, name, body, field) {
-        Ok(value) => {
-            match field {
-                Field::Emission => shared.edits.set_emission(name, value),
-                Field::Move => shared.edits.move_object(name, value),
-            }
+        Ok(edit) => {
             let mut body = serde_json::json!({ "object": name, "status": "queued" });
-            body[field.key()] = serde_json::json!(value);
+            match edit {
+                Edit::Emission(emission) => {
+                    shared.edits.set_emission(name, emission);
+                    body["emission"] = serde_json::json!(emission);
+                }
+                Edit::Move(motion) => {
+                    shared.edits.move_object(name, motion);
+                    // The move as it will be applied: every field named, defaults included.
+                    body["translate"] = serde_json::json!(motion.translate);
+                    if let Some(rotate) = motion.rotate {
+                        body["rotate"] = serde_json::json!(rotate);
+                    }
+                    if let Some(pivot) = motion.pivot {
+                        body["pivot"] = serde_json::json!(pivot);
+                    }
+                }
+            }
             Reply {
                 status: StatusCode::ACCEPTED,
                 body,
@@ -177,9 +205,9 @@ mod tests {
         let parse = |name, body: &str, field| parse_edit(&objects, name, body.as_bytes(), field);
         assert_eq!(
             parse("lamp", r#"{"emission": [1, 2, 3]}"#, Field::Emission),
-            Ok([1.0, 2.0, 3.0])
+            Ok(Edit::Emission([1.0, 2.0, 3.0]))
         );
-        let status = |r: Result<[f64; 3], Reply>| r.unwrap_err().status;
+        let status = |r: Result<Edit, Reply>| r.unwrap_err().status;
         assert_eq!(
             status(parse("desk", r#"{"emission": [1, 2, 3]}"#, Field::Emission)),
             StatusCode::NOT_FOUND
@@ -199,6 +227,52 @@ mod tests {
                 .unwrap()
                 .starts_with("emission "),
             "{refused:?}"
+        );
+    }
+
+    #[test]
+    fn a_move_is_a_translation_a_rotation_or_both_and_is_refused_with_what_was_wrong() {
+        let objects = vec!["box".to_string()];
+        let parse = |body: &str| parse_edit(&objects, "box", body.as_bytes(), Field::Move);
+        assert_eq!(
+            parse(r#"{"translate": [1, 2, 3]}"#),
+            Ok(Edit::Move(solver::Motion {
+                translate: [1.0, 2.0, 3.0],
+                ..Default::default()
+            }))
+        );
+        let turn = solver::Rotation {
+            axis: [0.0, 1.0, 0.0],
+            degrees: 30.0,
+        };
+        assert_eq!(
+            parse(r#"{"rotate": {"axis": [0, 1, 0], "degrees": 30}, "pivot": [5, 0, 5]}"#),
+            Ok(Edit::Move(solver::Motion {
+                rotate: Some(turn),
+                pivot: Some([5.0, 0.0, 5.0]),
+                ..Default::default()
+            }))
+        );
+        let error = |body: &str| {
+            let refused = parse(body).unwrap_err();
+            assert_eq!(refused.status, StatusCode::BAD_REQUEST, "{body}");
+            refused.body["error"].as_str().unwrap().to_string()
+        };
+        assert_eq!(
+            error(r#"{"rotate": {"axis": [0, 0, 0], "degrees": 30}}"#),
+            "rotate axis [0.0, 0.0, 0.0] must be finite and not zero"
+        );
+        assert_eq!(error(r#"{"pivot": [0, 0, 0]}"#), error("{}"));
+        assert!(error("{}").starts_with("body must be JSON like {\"translate\""));
+        assert!(
+            error(r#"{"translate": [1, 2, 3], "scale": 2}"#).contains("unknown field `scale`"),
+            "{}",
+            error(r#"{"translate": [1, 2, 3], "scale": 2}"#)
+        );
+        assert!(error(r#"{"rotate": {"axis": [0, 1, 0]}}"#).contains("missing field `degrees`"));
+        assert_eq!(
+            error(r#"{"translate": [1, 2, 3], "pivot": [0, 0, 0]}"#),
+            "a pivot needs a rotation"
         );
     }
 }

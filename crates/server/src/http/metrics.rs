@@ -250,12 +250,60 @@ fn solver_metrics(out: &mut Exposition, shared: &Shared) {
         "Batches of edits the solver finished (applied, or refused and reported).",
         &plain(*shared.edits.finished().borrow()),
     );
+    estimate_metrics(out, shared);
     let up = !matches!(shared.health.status(), Status::Down(_));
     out.metric(
         "radcast_solver_up",
         "gauge",
         "1 while the solver thread applies edits.",
         &plain(up as u64),
+    );
+}
+
+/// The self-check of the answer served, once there is one: per reading (smooth, flat), the
+/// estimated relative RMS error with its interval and the energy balance.
+fn estimate_metrics(out: &mut Exposition, shared: &Shared) {
+    let Some(estimate) = shared
+        .report
+        .lock()
+        .ok()
+        .and_then(|r| r.as_ref().and_then(|r| r.estimate))
+    else {
+        return;
+    };
+    let readings = [("smooth", estimate.smooth), ("flat", estimate.flat)];
+    let rms: Vec<_> = readings
+        .iter()
+        .flat_map(|(reading, e)| {
+            [("estimate", e.rms), ("low", e.low), ("high", e.high)].map(|(bound, value)| {
+                (
+                    format!("{{reading=\"{reading}\",bound=\"{bound}\"}}"),
+                    value,
+                )
+            })
+        })
+        .collect();
+    out.metric(
+        "radcast_estimated_error_ratio",
+        "gauge",
+        "Self-check: relative RMS error of the answer served, with its interval (3 standard errors).",
+        &rms,
+    );
+    let energy: Vec<_> = readings
+        .iter()
+        .map(|(reading, e)| (format!("{{reading=\"{reading}\"}}"), e.energy))
+        .collect();
+    out.metric(
+        "radcast_estimated_energy_ratio",
+        "gauge",
+        "Self-check: the answer's total over the traced total at the probes, minus 1.",
+        &energy,
+    );
+    out.metric(
+        "radcast_estimate_probes",
+        "gauge",
+        "Self-check: probes traced.",
+        &plain(estimate.probes as u64),
     );
 }
 

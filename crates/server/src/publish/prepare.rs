@@ -23,6 +23,9 @@ pub struct Prepared {
     pub scene_id: u64,
     /// The geometry viewers fetch first.
     pub geometry: Geometry,
+    /// Whether each solve is followed by its self-check ([`solver::check`]): on unless the
+    /// operator turns it off.
+    pub check: bool,
 }
 
 /// Loads and meshes `scene_path`; fails with the loader's message on bad input. Quick: a
@@ -48,6 +51,7 @@ pub fn prepare(scene_path: &Path, request: SolveRequest) -> anyhow::Result<Prepa
         digest,
         scene_id,
         geometry,
+        check: true,
     })
 }
 

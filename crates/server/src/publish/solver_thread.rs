@@ -4,10 +4,12 @@
 
 use super::cache::{self, CachedSolution, Rejected};
 use super::prepare::Prepared;
-use super::to_wire::{emission_only, geometry_of, report_for_viewers, to_f32};
+use super::to_wire::{
+    emission_only, estimate_for_viewers, geometry_of, report_for_viewers, to_f32,
+};
 use crate::Shared;
 use crate::health::Fault;
-use glam::DVec3;
+use solver::check::{CheckSettings, Estimate};
 use solver::{MoveWork, Progress, ProgressLine, ProgressThrottle, Rgb, Session};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -117,7 +119,10 @@ pub fn solve_and_publish(
             hub.publish(&to_f32(&mesh.corner_means(radiosity)), false);
         }
     };
-    let report = session.solve(&progress);
+    let mut report = session.solve(&progress);
+    if prepared.check {
+        report.estimate = Some(check(&session, shared, report.seconds.total));
+    }
     let radiosity = to_f32(session.radiosity());
     let vertex_radiosity = finite(to_f32(&session.vertex_radiosity()))?;
     let s = report.seconds;
@@ -181,6 +186,9 @@ fn publish_cached(prepared: &Prepared, shared: &Shared, dir: &Path) -> Option<Ve
     match entry {
         Ok((cached, geometry, report)) => {
             tracing::info!(path = %path.display(), "solution read from the cache");
+            if let Some(estimate) = &report.estimate {
+                judge(shared, estimate.smooth.rms, estimate.smooth.low);
+            }
             *shared.report.lock().expect("report lock") = Some(report);
             if geometry != *hub.geometry().model {
                 // A hierarchy's leaves, without refining again.
@@ -228,7 +236,7 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, base: EditBase) -> anyh
                 shared.hub.replace_geometry(fresh);
                 session.solve(&solver::no_progress);
             }
-            apply(&mut session, shared, batch)?;
+            apply(&mut session, shared, batch, prepared.check)?;
             session
         }
     };
@@ -236,7 +244,7 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, base: EditBase) -> anyh
     let iterations = session.prepare_emitters();
     tracing::info!(iterations, "emitter responses ready");
     while let Some(batch) = shared.edits.wait() {
-        apply(&mut session, shared, batch)?;
+        apply(&mut session, shared, batch, prepared.check)?;
     }
     Ok(())
 }
@@ -244,17 +252,23 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, base: EditBase) -> anyh
 /// Applies one batch and publishes the result. An edit the solver refuses (a move that would
 /// carry an object past the coordinate bound, say: each PUT was valid, their sum is not) is
 /// reported as [`Fault::Edit`] while the rest of the batch is applied; a solve that gives
-/// non-finite values is an error, and nothing of it is published.
+/// non-finite values is an error, and nothing of it is published. With `check_moves`, a batch
+/// with a move is self-checked before its frame is published.
 fn apply(
     session: &mut Session,
     shared: &Shared,
     batch: crate::control::edits::Batch,
+    check_moves: bool,
 ) -> anyhow::Result<()> {
     let started = Instant::now();
     let mut refused = Vec::new();
     let mut moved = false;
-    for (object, offset) in &batch.moves {
-        match session.move_object(object, DVec3::from(*offset)) {
+    for (object, motion) in batch
+        .moves
+        .iter()
+        .flat_map(|(object, moves)| moves.iter().map(move |m| (object, *m)))
+    {
+        match session.move_object(object, motion) {
             Ok(report) => {
                 moved = true;
                 let ms = report.seconds * 1e3;
@@ -297,7 +311,24 @@ fn apply(
     };
     let vertex_radiosity = finite(to_f32(&session.vertex_radiosity()))?;
     report_convergence(shared, &report);
-    *shared.report.lock().expect("report lock") = Some(report_for_viewers(&report));
+    let mut served = report_for_viewers(&report);
+    // A move is measured again before its frame goes out (the report and the frame travel
+    // together, to edges too); emissions scale the light the last check measured and keep it.
+    served.estimate = match moved {
+        true if check_moves => Some(estimate_for_viewers(&check(
+            session,
+            shared,
+            report.seconds.total,
+        ))),
+        true => None,
+        false => shared
+            .report
+            .lock()
+            .expect("report lock")
+            .as_ref()
+            .and_then(|r| r.estimate),
+    };
+    *shared.report.lock().expect("report lock") = Some(served);
     // Health before the frame: a viewer that sees the new version sees its health too.
     match refused.is_empty() {
         true => shared.health.recovered(Fault::Edit),
@@ -318,6 +349,32 @@ fn apply(
         session.prepare_emitters();
     }
     Ok(())
+}
+
+/// The self-check of `session`'s answer after a solve of `solve_seconds`, logged, its
+/// verdict in [`Fault::Inaccurate`].
+fn check(session: &Session, shared: &Shared, solve_seconds: f64) -> Estimate {
+    let estimate = session.self_check(&CheckSettings::after_solve(solve_seconds));
+    tracing::info!(
+        smooth_rms = estimate.smooth.rms,
+        smooth_low = estimate.smooth.low,
+        smooth_high = estimate.smooth.high,
+        energy = estimate.smooth.energy,
+        probes = estimate.probes,
+        seconds = estimate.seconds,
+        "self-check"
+    );
+    judge(shared, estimate.smooth.rms, estimate.smooth.low);
+    estimate
+}
+
+/// `/healthz` degraded while the self-check says the answer served is bad
+/// ([`solver::check::warning`]).
+fn judge(shared: &Shared, smooth_rms: f64, smooth_low: f64) {
+    match solver::check::warning(smooth_rms, smooth_low) {
+        Some(warning) => shared.health.fault(Fault::Inaccurate, warning),
+        None => shared.health.recovered(Fault::Inaccurate),
+    }
 }
 
 /// A solve that stopped short of its tolerance as [`Fault::NotConverged`] (its frames are

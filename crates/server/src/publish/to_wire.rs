@@ -3,7 +3,9 @@
 use glam::DVec3;
 use solver::{Mesh, Rgb, Scene};
 use wire::geometry::{NO_CORNER, NO_TEXTURE, SurfaceTextures};
-use wire::summary::{HierarchyCounts, ObjectRadiosity, SolveReport, StageSeconds};
+use wire::summary::{
+    ErrorEstimate, HierarchyCounts, ObjectRadiosity, ReadingError, SolveReport, StageSeconds,
+};
 use wire::{Camera, Geometry};
 
 /// Radiosity as the hub takes it.
@@ -118,6 +120,24 @@ pub fn report_for_viewers(report: &solver::SolveReport) -> SolveReport {
             leaf_budget_reached: h.leaf_budget_reached,
             link_budget_reached: h.link_budget_reached,
         }),
+        estimate: report.estimate.as_ref().map(estimate_for_viewers),
+    }
+}
+
+/// The self-check as `/api/solution` gives it.
+pub fn estimate_for_viewers(e: &solver::check::Estimate) -> ErrorEstimate {
+    let reading = |r: &solver::check::ReadingEstimate| ReadingError {
+        rms: r.rms,
+        low: r.low,
+        high: r.high,
+        energy: r.energy,
+    };
+    ErrorEstimate {
+        smooth: reading(&e.smooth),
+        flat: reading(&e.flat),
+        noise: e.noise,
+        probes: e.probes,
+        seconds: e.seconds,
     }
 }
 
@@ -128,7 +148,7 @@ mod tests {
     use std::path::Path;
 
     /// What `radcast solve --json` prints and what `/api/solution` carries as `report`: one
-    /// schema, key for key and value for value, for both methods.
+    /// schema, key for key and value for value, for both methods, the self-check included.
     #[test]
     fn the_report_viewers_get_is_the_solver_report_key_for_key() {
         let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.obj");
@@ -145,12 +165,23 @@ mod tests {
                 ..SolveRequest::default()
             }
             .with_method(method, coarse);
-            let report = solve_file(&scene, &request, &solver::no_progress)
-                .expect("the shipped scene solves")
-                .report;
+            let solved = solve_file(&scene, &request, &solver::no_progress)
+                .expect("the shipped scene solves");
+            let mut report = solved.report;
+            report.estimate = Some(solver::check::self_check(
+                &solved.scene,
+                &solver::visibility::Occluders::new(&solved.scene),
+                &solved.mesh,
+                (&solved.radiosity, &solved.vertex_radiosity),
+                &solver::check::CheckSettings::after_solve(0.0),
+            ));
             let printed = serde_json::to_value(&report).expect("the report serialises");
             let served = serde_json::to_value(report_for_viewers(&report)).expect("serialises");
             assert_eq!(printed, served, "{method}");
+            assert!(
+                printed["estimate"]["smooth"]["rms"].is_number(),
+                "{printed}"
+            );
             assert_eq!(
                 printed.get("elements").is_some(),
                 method == MethodChoice::Hierarchical,

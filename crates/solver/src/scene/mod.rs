@@ -2,10 +2,11 @@
 //! emitted radiosity, and the physical limits every value is checked against. No I/O: files
 //! become scenes in [`crate::input`]; code builds them with [`Scene::add_polygon`].
 
+pub mod motion;
 pub mod texture;
 
 use crate::geometry::Polygon;
-use glam::DVec3;
+use glam::{DAffine3, DVec3};
 use texture::{Texture, TextureMap};
 
 /// A linear RGB triple: radiosity in W/m^2 per channel, or a unitless reflectance.
@@ -290,11 +291,25 @@ impl Scene {
     }
 
     /// Moves every face of `object` by `offset`.
-    pub fn translate_object(&mut self, object: u32, offset: DVec3) {
+    pub fn move_object(&mut self, object: u32, motion: &DAffine3) {
         for face in self.faces.iter_mut().filter(|f| f.object == object) {
-            face.polygon = face.polygon.translated(offset);
-            face.texture = face.texture.as_ref().map(|map| map.translated(offset));
+            face.polygon = face.polygon.moved(motion);
+            face.texture = face.texture.as_ref().map(|map| map.moved(motion));
         }
+    }
+
+    /// The centre of `object`'s bounding box: where a rotation turns it about by default.
+    pub fn object_centre(&self, object: u32) -> DVec3 {
+        let (lo, hi) = crate::geometry::bounds(self.object_corners(object));
+        (lo + hi) * 0.5
+    }
+
+    /// The corners of `object`'s faces.
+    pub fn object_corners(&self, object: u32) -> impl Iterator<Item = DVec3> + '_ {
+        self.faces
+            .iter()
+            .filter(move |f| f.object == object)
+            .flat_map(|f| f.polygon.corners().iter().copied())
     }
 
     /// The number of faces as the scene file gave them (before contact lines cut them).

@@ -4,7 +4,7 @@
 //! sRGB-encoded by convention (glTF's base colour, OBJ's `map_Kd`); float texels are linear.
 
 use crate::scene::Rgb;
-use glam::DVec3;
+use glam::{DAffine3, DVec3};
 use std::sync::Arc;
 
 /// The sRGB transfer function inverted (IEC 61966-2-1).
@@ -136,10 +136,12 @@ impl TextureMap {
         ]
     }
 
-    /// The same map for the face moved by `offset`.
-    pub fn translated(&self, offset: DVec3) -> TextureMap {
+    /// The same map for the face moved rigidly by `motion`: the gradients turn with it.
+    pub fn moved(&self, motion: &DAffine3) -> TextureMap {
         TextureMap {
-            origin: self.origin + offset,
+            origin: motion.transform_point3(self.origin),
+            du: motion.transform_vector3(self.du),
+            dv: motion.transform_vector3(self.dv),
             ..self.clone()
         }
     }
@@ -180,8 +182,18 @@ mod tests {
         // u = 0.25 + (x - 1) / 2, v = 0.5 - (z - 3) / 2 everywhere in the plane.
         let p = dvec3(2.2, 2.0, 4.6);
         assert!(close(map.uv_at(p), [0.85, -0.3]));
-        let moved = map.translated(dvec3(10.0, -1.0, 0.5));
-        assert!(close(moved.uv_at(p + dvec3(10.0, -1.0, 0.5)), [0.85, -0.3]));
+        // A point moved with its face keeps its coordinates, turned as well as shifted.
+        let motion = crate::scene::motion::Motion {
+            translate: [10.0, -1.0, 0.5],
+            rotate: Some(crate::scene::motion::Rotation {
+                axis: [1.0, 2.0, 3.0],
+                degrees: 33.0,
+            }),
+            pivot: None,
+        }
+        .affine(dvec3(1.0, 2.0, 3.0));
+        let moved = map.moved(&motion);
+        assert!(close(moved.uv_at(motion.transform_point3(p)), [0.85, -0.3]));
         assert!(close(map.scaled(1e-3).uv_at(p * 1e-3), [0.85, -0.3]));
         let line = [corners[0], corners[1], corners[0] * 2.0 - corners[1]];
         assert_eq!(TextureMap::of_triangle(0, line, uv), None);
@@ -250,13 +262,13 @@ mod tests {
                 assert!(close(map.uv_at(p), [p.x / 10.0, p.z / 10.0]), "{p}");
             }
         }
-        let offset = dvec3(1.0, 0.0, -2.0);
+        let offset = DAffine3::from_translation(dvec3(1.0, 0.0, -2.0));
         let before = scene.faces[0]
             .texture
             .as_ref()
             .unwrap()
             .uv_at(scene.faces[0].polygon.corners()[0]);
-        scene.translate_object(floor, offset);
+        scene.move_object(floor, &offset);
         let face = &scene.faces[0];
         assert!(close(
             face.texture

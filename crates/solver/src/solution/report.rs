@@ -1,6 +1,7 @@
 //! What a solve reports: one schema, serialised as `radcast solve --json` prints it and as
 //! `/api/solution` carries it.
 
+use crate::check::Estimate;
 use crate::hierarchy::HierarchyStats;
 use serde::Serialize;
 
@@ -61,4 +62,7 @@ pub struct SolveReport {
     /// Elements, links and refinement rounds of a hierarchical solve (absent for dense).
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
     pub hierarchy: Option<HierarchyStats>,
+    /// The self-check of this answer ([`crate::check`]), when one was run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub estimate: Option<Estimate>,
 }

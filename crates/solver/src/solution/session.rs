@@ -4,10 +4,12 @@
 use super::report::{ObjectRadiosity, SolveReport, StageSeconds};
 use super::request::{SolveError, SolveRequest, check_dense_size};
 use super::vertices::{CornerLight, clamp_below_zero};
+use crate::check::{CheckSettings, Estimate};
 use crate::form_factors::{DenseFormFactors, UpdateStats};
 use crate::hierarchy::{BuiltHierarchy, Hierarchy, HierarchyStats};
 use crate::mesh::Mesh;
-use crate::scene::{MAX_COORDINATE, Rgb, Scene, check_emission, check_translation};
+use crate::scene::motion::{Motion, reach_after};
+use crate::scene::{MAX_COORDINATE, Rgb, Scene, check_emission};
 use crate::solve::{NeedsEntries, SolveOutcome, System, solve};
 use crate::transport::Transport;
 use crate::visibility::Occluders;
@@ -89,10 +91,10 @@ pub enum EditError {
     /// An emission out of range ([`crate::scene::check_emission`]).
     #[error("emission {0}")]
     InvalidEmission(String),
-    /// A translation out of range ([`crate::scene::check_translation`]), or one that would
-    /// take the object past [`crate::scene::MAX_COORDINATE`].
-    #[error("translation {0}")]
-    InvalidTranslation(String),
+    /// A move out of range ([`Motion::check`]), or one that would take the object past
+    /// [`crate::scene::MAX_COORDINATE`].
+    #[error("{0}")]
+    InvalidMove(String),
 }
 
 /// What moving an object cost.
@@ -260,6 +262,17 @@ impl Session {
         &self.mesh
     }
 
+    /// The self-check of the current answer ([`crate::check`]).
+    pub fn self_check(&self, settings: &CheckSettings) -> Estimate {
+        crate::check::self_check(
+            &self.scene,
+            &Occluders::new(&self.scene),
+            &self.mesh,
+            (&self.radiosity, &self.vertex_radiosity()),
+            settings,
+        )
+    }
+
     /// The hierarchy's statistics, for a hierarchical session.
     fn hierarchy_stats(&self) -> Option<HierarchyStats> {
         match &self.factors {
@@ -276,27 +289,22 @@ impl Session {
             .ok_or_else(|| EditError::UnknownObject(name.into()))
     }
 
-    /// Moves object `name` by `offset`, recomputing only the form factors it can affect. The
+    /// Moves object `name` rigidly (a translation, or a rotation about its centre or a given
+    /// pivot, then a translation), recomputing only the form factors the move can affect. The
     /// next [`Session::solve`] solves the moved scene in full (with the current emission).
-    pub fn move_object(&mut self, name: &str, offset: DVec3) -> Result<MoveReport, EditError> {
+    pub fn move_object(
+        &mut self,
+        name: &str,
+        motion: impl Into<Motion>,
+    ) -> Result<MoveReport, EditError> {
         let object = self.object_index(name)?;
-        check_translation(offset.to_array()).map_err(EditError::InvalidTranslation)?;
-        let reach = self
-            .scene
-            .faces
-            .iter()
-            .filter(|f| f.object == object)
-            .flat_map(|f| {
-                f.polygon
-                    .corners()
-                    .iter()
-                    .map(|c| (*c + offset).abs().max_element())
-            })
-            .fold(0.0, f64::max);
+        let motion = motion.into();
+        motion.check().map_err(EditError::InvalidMove)?;
+        let affine = motion.affine(self.scene.object_centre(object));
+        let reach = reach_after(&affine, self.scene.object_corners(object));
         if reach > MAX_COORDINATE {
-            return Err(EditError::InvalidTranslation(format!(
-                "{:?} would take '{name}' {reach:e} from the origin, past {MAX_COORDINATE:e}",
-                offset.to_array()
+            return Err(EditError::InvalidMove(format!(
+                "{motion} would take '{name}' {reach:e} from the origin, past {MAX_COORDINATE:e}"
             )));
         }
         let clock = Instant::now();
@@ -313,21 +321,14 @@ impl Session {
         }
         self.responses.clear();
         self.base_vertices = None;
-        let corners = |scene: &Scene| {
-            scene
-                .faces
-                .iter()
-                .filter(|f| f.object == object)
-                .flat_map(|f| f.polygon.corners().to_vec())
-                .collect::<Vec<_>>()
-        };
-        let mut swept = corners(&self.scene);
-        self.scene.translate_object(object, offset);
-        swept.extend(corners(&self.scene));
+        // Form factors change only where the object was and where it is now.
+        let mut swept: Vec<DVec3> = self.scene.object_corners(object).collect();
+        self.scene.move_object(object, &affine);
+        swept.extend(self.scene.object_corners(object));
         match &mut self.factors {
             Factors::Dense(form_factors) => {
                 let occluders = Occluders::new(&self.scene);
-                self.mesh.translate_object(object, offset);
+                self.mesh.move_object(object, &affine);
                 let moved: Vec<bool> = self.patch_objects.iter().map(|o| *o == object).collect();
                 let stats = form_factors.update_moved(
                     &self.mesh,
@@ -603,6 +604,7 @@ impl Session {
                 })
                 .collect(),
             hierarchy: self.hierarchy_stats(),
+            estimate: None,
         }
     }
 }
@@ -792,7 +794,7 @@ mod tests {
         for bad in [DVec3::new(0.0, f64::NAN, 0.0), DVec3::new(1e39, 0.0, 0.0)] {
             assert!(matches!(
                 live.move_object("floor", bad),
-                Err(EditError::InvalidTranslation(_))
+                Err(EditError::InvalidMove(_))
             ));
         }
 
@@ -807,8 +809,9 @@ mod tests {
         assert!(live.move_object("floor", far).is_ok(), "up to the bound");
         assert_eq!(
             live.move_object("floor", far),
-            Err(EditError::InvalidTranslation(
-                "[1e30, 0.0, 0.0] would take 'floor' 2e30 from the origin, past 1e30".into()
+            Err(EditError::InvalidMove(
+                "translate [1e30, 0.0, 0.0] would take 'floor' 2e30 from the origin, past 1e30"
+                    .into()
             ))
         );
     }
