@@ -3,13 +3,13 @@
 mod bench;
 mod fuzz;
 mod generate;
+mod progress;
 mod reference;
 mod solve;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
-use solver::{Progress, ProgressLine, ProgressThrottle};
-use std::time::{Duration, Instant};
+pub(crate) use progress::ProgressPrinter;
 
 /// Counts heap bytes, so that reports can give their peak.
 #[global_allocator]
@@ -40,32 +40,6 @@ enum Command {
     /// --error, sweep configurations against each scene's reference and write
     /// docs/speed-vs-error.md and .svg.
     Bench(bench::BenchCommand),
-}
-
-/// Prints a progress line to stderr at most once a second, after the first second.
-pub(crate) struct ProgressPrinter {
-    start: Instant,
-    throttle: ProgressThrottle,
-}
-
-impl ProgressPrinter {
-    pub(crate) fn new() -> Self {
-        ProgressPrinter {
-            start: Instant::now(),
-            throttle: ProgressThrottle::new(Duration::from_secs(1)),
-        }
-    }
-
-    pub(crate) fn report(&self, progress: Progress) {
-        match self.throttle.admit(progress) {
-            Some(ProgressLine::Warning(line)) => eprintln!("warning: {line}"),
-            Some(ProgressLine::Notice(line)) => eprintln!("{line}"),
-            Some(ProgressLine::Status(line)) => {
-                eprintln!("[{:6.1}s] {line}", self.start.elapsed().as_secs_f64())
-            }
-            None => {}
-        }
-    }
 }
 
 fn main() -> anyhow::Result<()> {

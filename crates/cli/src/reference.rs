@@ -61,6 +61,7 @@ pub fn write_reference(
     let traced = trace_probes(&scene, &occluders, &placed, samples, seed, &|p| {
         printer.report(p)
     });
+    drop(printer);
     let command = format!(
         "radcast reference {} --probes {probes} --samples {samples} --seed {seed} --out {}",
         path.display(),

@@ -173,11 +173,13 @@ fn measure(
 ) -> anyhow::Result<Row> {
     let mut runs = Vec::new();
     let mut peak_bytes = 0;
+    let printer = crate::ProgressPrinter::new();
     for _ in 0..repeat {
         crate::HEAP.reset_peak_usage();
-        runs.push(solve_scene(scene.clone(), request, &solver::no_progress)?);
+        runs.push(solve_scene(scene.clone(), request, &|p| printer.report(p))?);
         peak_bytes = peak_bytes.max(crate::HEAP.peak_usage());
     }
+    drop(printer);
     let stage = |f: fn(&solver::SolveReport) -> f64| {
         super::median(runs.iter().map(|r| f(&r.report)).collect())
     };

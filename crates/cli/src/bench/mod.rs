@@ -169,9 +169,11 @@ fn bench(
         .request(HierarchySettings::default())
         .map_err(anyhow::Error::msg)?;
         let mut runs = Vec::new();
+        let printer = crate::ProgressPrinter::new();
         for _ in 0..repeat {
-            runs.push(solve_file(scene, &request, &solver::no_progress)?.report);
+            runs.push(solve_file(scene, &request, &|p| printer.report(p))?.report);
         }
+        drop(printer);
         let stage = |f: fn(&SolveReport) -> f64| median(runs.iter().map(f).collect());
         let (load, mesh, ff, solve, total) = (
             stage(|r| r.seconds.load),
