@@ -74,3 +74,71 @@ fn the_estimate_recovers_a_known_error_within_its_interval_for_every_seed() {
         assert_eq!(off.probes, 256);
     }
 }
+
+/// `--target-error` on the Cornell box, both ways: a hierarchy refined from where it is (each
+/// step's knob half the last, from 0.4; its leaves never fewer) and a dense mesh solved again
+/// twice as fine. Each stops at the first step whose bound is within the target, and the
+/// answer is within it against the stored reference too.
+#[test]
+fn a_solve_to_a_target_stops_within_it_and_is_within_it_on_the_cornell_box() {
+    let path = "scenes/reference/cornell-box.json";
+    let text = std::fs::read_to_string(path).expect("the shipped reference");
+    let reference: solver::reference::Reference = serde_json::from_str(&text).expect(path);
+    let target = solver::Target {
+        error: 0.05,
+        seconds: None,
+    };
+    let dense = SolveRequest {
+        patches: PatchTarget::Count(100),
+        ..SolveRequest::default()
+    };
+    let hierarchical = dense.with_method(
+        solver::MethodChoice::Hierarchical,
+        solver::HierarchySettings::default(),
+    );
+    for request in [hierarchical, dense] {
+        let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+        let (solved, report) =
+            solver::solve_to_target(scene, &request, &target, &solver::no_progress).unwrap();
+        let steps = &report.steps;
+        println!("{report:?}");
+        assert!(report.reached && report.stopped == "reached", "{report:?}");
+        let last = steps.last().unwrap();
+        assert!(last.high <= target.error, "{report:?}");
+        assert!(
+            steps[..steps.len() - 1]
+                .iter()
+                .all(|s| s.high > target.error),
+            "stopped at the first step within the target: {report:?}"
+        );
+        assert_eq!(
+            solved.report.estimate.map(|e| e.smooth.high),
+            Some(last.high)
+        );
+        for pair in steps.windows(2) {
+            match (pair[0].knob, pair[1].knob) {
+                (Some(coarse), Some(fine)) => {
+                    assert_eq!(fine, (coarse / 2.0).max(0.03), "{report:?}");
+                    assert!(pair[1].patches >= pair[0].patches, "{report:?}");
+                }
+                _ => assert!(pair[1].patches > pair[0].patches, "{report:?}"),
+            }
+        }
+        assert_eq!(steps[0].knob.is_some(), request.hierarchy.is_some());
+        if let Some(knob) = steps[0].knob {
+            assert_eq!(knob, solver::STARTING_KNOB);
+        }
+        let measured = solver::accuracy::evaluate(
+            &solved.scene,
+            &solved.mesh,
+            &solved.radiosity,
+            &solved.vertex_radiosity,
+            &reference.probes,
+        );
+        assert!(
+            measured.smooth.rms <= target.error,
+            "{} against the reference: {report:?}",
+            measured.smooth.rms
+        );
+    }
+}

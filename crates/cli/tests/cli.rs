@@ -504,3 +504,54 @@ fn a_scene_that_emits_no_light_is_warned_about_before_the_solve() {
         );
     }
 }
+
+#[test]
+fn a_solve_to_a_target_says_where_it_stopped_and_refuses_what_cannot_work() {
+    let (value, stderr) = radcast_json(&[
+        "solve",
+        "scenes/cornell-box.obj",
+        "--method",
+        "hierarchical",
+        "--target-error",
+        "0.08",
+        "--json",
+    ]);
+    let target = &value["target"];
+    assert_eq!(target["error"], 0.08, "{value}");
+    assert_eq!(target["reached"], true, "{value}");
+    assert_eq!(target["stopped"], "reached", "{value}");
+    let steps = target["steps"].as_array().unwrap();
+    let last = steps.last().unwrap();
+    assert_eq!(last["high"], value["estimate"]["smooth"]["high"], "{value}");
+    assert_eq!(last["knob"], value["knob_used"], "{value}");
+    // Each step that fell short says so, and what comes next.
+    assert_eq!(
+        stderr.matches("self-check: ").count(),
+        steps.len() - 1,
+        "{stderr}"
+    );
+
+    for (args, reason) in [
+        (
+            &["--target-error", "1.5"][..],
+            "--target-error must be in (0, 1), got 1.5",
+        ),
+        (
+            &["--target-error", "0.05", "--time-limit", "0"],
+            "--time-limit must be a positive number of seconds, got 0",
+        ),
+        (
+            &["--target-error", "0.05", "--check", "off"],
+            "--target-error needs the self-check: drop --check off",
+        ),
+        (
+            &["--time-limit", "10"],
+            "the following required arguments were not provided",
+        ),
+    ] {
+        let output = radcast(&[&["solve", "scenes/cornell-box.obj"][..], args].concat());
+        assert!(!output.status.success(), "{args:?}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(stderr.contains(reason), "{args:?}: {stderr}");
+    }
+}

@@ -51,6 +51,7 @@ pub use solution::pipeline::{Solved, solve_file, solve_mesh, solve_scene};
 pub use solution::report::{ObjectRadiosity, SolveReport, StageSeconds};
 pub use solution::request::{MethodChoice, SolveError, SolveRequest, starting_mesh};
 pub use solution::session::{EditError, MoveReport, MoveWork, Session};
+pub use solution::target::{STARTING_KNOB, Target, TargetReport, TargetStep, solve_to_target};
 pub use solve::{Method, SolveOutcome, SolverSettings, System, solve};
 pub use transport::{Entries, Transport};
 

@@ -267,20 +267,42 @@ impl Hierarchy {
             })
             .collect();
         unrefined.index(occluders);
-        let run = Rounds {
-            occluders,
-            rays,
-            solver,
-            progress,
-            max_rounds: settings.max_rounds,
-            estimate: ambient_estimate(scene),
-            finest_radius: refine::finest_radius(receiving_area(scene), settings.max_leaves),
-        };
-        let budget = Budget {
-            max_leaves: settings.max_leaves,
-            max_links: settings.max_links,
-        };
-        run.refine(unrefined, settings.error, budget)
+        let run = Rounds::new(scene, occluders, settings, rays, solver, progress);
+        run.refine(unrefined, settings.error, settings.budget(), None)
+    }
+
+    /// Refines this hierarchy of `scene` further, at the finer error `knob` (the rest of
+    /// `settings` as it was built with): the links that `radiosity` (solved, one value per
+    /// leaf) shows too coarse for it, then round after round on each new solution, as
+    /// [`Hierarchy::build`] does. Nothing is thrown away. Returns the hierarchy with its last
+    /// solution on its (new) leaves.
+    #[allow(clippy::too_many_arguments)]
+    pub fn refine_further(
+        self,
+        scene: &Scene,
+        occluders: &Occluders,
+        settings: &HierarchySettings,
+        rays: FormFactorSettings,
+        solver: &SolverSettings,
+        (knob, radiosity): (f64, Vec<Rgb>),
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<BuiltHierarchy, NeedsEntries> {
+        let run = Rounds::new(scene, occluders, settings, rays, solver, progress);
+        run.refine(self, knob, settings.budget(), Some(radiosity))
+    }
+
+    /// Whether a finer knob could change anything: neither budget has stopped refinement.
+    pub fn can_refine_further(&self) -> bool {
+        !(self.stats.leaf_budget_reached || self.stats.link_budget_reached)
+    }
+}
+
+impl HierarchySettings {
+    fn budget(&self) -> Budget {
+        Budget {
+            max_leaves: self.max_leaves,
+            max_links: self.max_links,
+        }
     }
 }
 
@@ -305,30 +327,54 @@ struct Rounds<'a> {
     finest_radius: f64,
 }
 
-impl Rounds<'_> {
-    /// Refines `hierarchy` (unrefined, indexed) at error `knob`, coarser where `budget` asks
-    /// for it: first on the ambient estimate, then on each new solution until no link needs
-    /// refining or the rounds run out.
+impl<'a> Rounds<'a> {
+    fn new(
+        scene: &Scene,
+        occluders: &'a Occluders,
+        settings: &HierarchySettings,
+        rays: FormFactorSettings,
+        solver: &'a SolverSettings,
+        progress: &'a (dyn Fn(Progress) + Sync),
+    ) -> Self {
+        Rounds {
+            occluders,
+            rays,
+            solver,
+            progress,
+            max_rounds: settings.max_rounds,
+            estimate: ambient_estimate(scene),
+            finest_radius: refine::finest_radius(receiving_area(scene), settings.max_leaves),
+        }
+    }
+
+    /// Refines `hierarchy` (indexed) at error `knob`, coarser where `budget` asks for it:
+    /// unrefined, first on the ambient estimate; refined already, on its `solved` radiosity;
+    /// then on each new solution until no link needs refining or the rounds run out.
     fn refine(
         &self,
         mut hierarchy: Hierarchy,
         mut knob: f64,
         budget: Budget,
+        solved: Option<Vec<Rgb>>,
     ) -> Result<BuiltHierarchy, NeedsEntries> {
-        let mut radiosity: Vec<Rgb> = (0..hierarchy.tree.leaves.len())
-            .map(|i| {
-                let patch = hierarchy.tree.leaf_patch(i);
-                patch.emission + patch.reflectance * self.estimate
-            })
-            .collect();
-        let mut pending = if hierarchy.tree.nodes.is_empty() {
+        let resumed = solved.is_some();
+        let mut radiosity: Vec<Rgb> = solved.unwrap_or_else(|| {
+            (0..hierarchy.tree.leaves.len())
+                .map(|i| {
+                    let patch = hierarchy.tree.leaf_patch(i);
+                    patch.emission + patch.reflectance * self.estimate
+                })
+                .collect()
+        });
+        let mut pending = if hierarchy.tree.nodes.is_empty() || resumed {
             Vec::new()
         } else {
             vec![(0, 0)]
         };
         for round in 0..self.max_rounds.max(1) {
             // Past the link budget no pair splits: another round could change no link.
-            if round > 0 && hierarchy.stats.link_budget_reached {
+            let on_links = round > 0 || resumed;
+            if on_links && hierarchy.stats.link_budget_reached {
                 break;
             }
             if round > 0 {
@@ -347,7 +393,7 @@ impl Rounds<'_> {
                 smallest: MIN_RADIUS_PER_ERROR * knob,
                 finest_radius: self.finest_radius,
             };
-            if round > 0 {
+            if on_links {
                 pending = hierarchy.take_links_to_redo(&sources, &target);
                 if pending.is_empty() {
                     break;
@@ -371,7 +417,7 @@ impl Rounds<'_> {
                 &mut pass,
             );
             knob = pass.knob;
-            hierarchy.stats.rounds = round + 1;
+            hierarchy.stats.rounds += 1;
             hierarchy.index(self.occluders);
             radiosity = hierarchy.inherit(inherited, before);
         }

@@ -7,4 +7,5 @@ pub mod pipeline;
 pub mod report;
 pub mod request;
 pub mod session;
+pub mod target;
 pub mod vertices;

@@ -32,6 +32,11 @@ impl Solved {
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Solved {
         let report = session.solve(progress);
+        Solved::kept(scene, session, report)
+    }
+
+    /// What `session` solved, as `report` says, kept.
+    pub(crate) fn kept(scene: Scene, session: Session, report: SolveReport) -> Solved {
         let vertex_radiosity = session.vertex_radiosity();
         let (mesh, radiosity) = session.into_solution();
         Solved {

@@ -204,6 +204,59 @@ impl Session {
         ))
     }
 
+    /// This hierarchical session refined further at the finer error `knob`, from its current
+    /// solution ([`Hierarchy::refine_further`]: nothing is thrown away), with whether anything
+    /// changed: not for a dense session, one edited since it was built, or a hierarchy a budget
+    /// stopped. The next [`Session::solve`] solves on the new leaves.
+    pub fn refine_further(
+        self,
+        knob: f64,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<(Session, bool), NeedsEntries> {
+        let can = matches!(&self.factors, Factors::Hierarchy(h) if h.can_refine_further());
+        if !can || !self.edited.is_empty() {
+            return Ok((self, false));
+        }
+        let Session {
+            scene,
+            factors,
+            radiosity,
+            request,
+            mut seconds,
+            ..
+        } = self;
+        let Factors::Hierarchy(hierarchy) = factors else {
+            unreachable!("checked to be a hierarchy above")
+        };
+        let clock = Instant::now();
+        let occluders = Occluders::new(&scene);
+        let settings = request.hierarchy.unwrap_or_default();
+        let BuiltHierarchy {
+            hierarchy,
+            radiosity,
+        } = hierarchy.refine_further(
+            &scene,
+            &occluders,
+            &settings,
+            request.form_factors,
+            &request.solver,
+            (knob, radiosity),
+            progress,
+        )?;
+        seconds.form_factors += clock.elapsed().as_secs_f64();
+        let mesh = hierarchy.leaf_mesh();
+        let session = Session::assemble(
+            scene,
+            mesh,
+            Factors::Hierarchy(Box::new(hierarchy)),
+            &occluders,
+            &request,
+            seconds,
+            radiosity,
+        );
+        Ok((session, true))
+    }
+
     fn assemble(
         scene: Scene,
         mesh: Mesh,
