@@ -98,8 +98,12 @@ fn a_solve_to_a_target_stops_within_it_and_is_within_it_on_the_cornell_box() {
     );
     for request in [hierarchical, dense] {
         let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
-        let (solved, report) =
-            solver::solve_to_target(scene, &request, &target, &solver::no_progress).unwrap();
+        let request = SolveRequest {
+            target: Some(target),
+            ..request
+        };
+        let solved = solve_scene(scene, &request, &solver::no_progress).unwrap();
+        let report = solved.report.target.clone().expect("a target was asked");
         let steps = &report.steps;
         println!("{report:?}");
         assert!(report.reached && report.stopped == "reached", "{report:?}");

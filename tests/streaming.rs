@@ -701,6 +701,40 @@ fn the_self_check_is_served_in_the_report_and_metrics_and_a_bad_answer_degrades_
     assert_eq!(shared.health.status(), server::health::Status::Ok);
 }
 
+#[test]
+fn a_server_solving_to_a_target_serves_each_step_then_the_final_one() {
+    let request = SolveRequest {
+        target: Some(solver::Target {
+            error: 0.08,
+            seconds: None,
+        }),
+        ..SolveRequest::default().with_method(
+            solver::MethodChoice::Hierarchical,
+            solver::HierarchySettings::default(),
+        )
+    };
+    let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).unwrap();
+    let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
+    solve_and_publish(&prepared, &shared, None).unwrap();
+    let summary = routes::solution_summary(&shared);
+    let report = summary.report.expect("solved");
+    let target = report.target.expect("a target was asked");
+    assert!(summary.is_final && target.reached, "{target:?}");
+    assert_eq!(target.stopped, "reached");
+    // Version 1 is the emission alone; then each step, not final; then the final one.
+    assert_eq!(
+        summary.solution_version,
+        target.steps.len() as u64 + 2,
+        "{target:?}"
+    );
+    let last = target.steps.last().unwrap();
+    assert_eq!(report.estimate.map(|e| e.smooth.high), Some(last.high));
+    // What viewers hold is the last step's leaves.
+    assert_eq!(shared.hub.geometry().model.patches.len(), last.patches);
+    assert_eq!(report.patches, last.patches);
+    assert_eq!(shared.health.status(), server::health::Status::Ok);
+}
+
 /// A TCP connection to `address` from the loopback address `from` (any 127.x.y.z works on Linux).
 async fn connect_from(from: &str, address: SocketAddr) -> tokio::net::TcpStream {
     let socket = tokio::net::TcpSocket::new_v4().unwrap();

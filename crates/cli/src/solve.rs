@@ -7,7 +7,7 @@ use solver::args::{Check, SolveArgs, budget_warnings};
 use solver::check::{CheckSettings, Estimate, ReadingEstimate, self_check};
 use solver::reference::Reference;
 use solver::visibility::Occluders;
-use solver::{SolveReport, Target, TargetReport, solve_file, solve_to_target};
+use solver::{SolveReport, solve_file};
 use std::path::PathBuf;
 
 /// The arguments of `radcast solve`.
@@ -28,56 +28,6 @@ pub struct SolveCommand {
     /// own; `estimate` in the JSON); `off` skips it.
     #[arg(long, value_enum, default_value_t = Check::On)]
     pub check: Check,
-    /// Refine until the self-check's upper bound on the smooth RMS error is at most this
-    /// (0.05 for 5%): a hierarchy from a coarse knob (0.4), halved each step down to --error,
-    /// refined from where it is; a dense mesh solved again at twice --patches each step. Says
-    /// where it stopped and why (`target` in the JSON).
-    #[arg(long)]
-    pub target_error: Option<f64>,
-    /// With --target-error: seconds the whole solve may take, about (a step is not started
-    /// when the time spent plus the last step's would pass it).
-    #[arg(long, requires = "target_error")]
-    pub time_limit: Option<f64>,
-}
-
-/// The target `--target-error` and `--time-limit` ask for, checked.
-fn target_of(
-    error: Option<f64>,
-    seconds: Option<f64>,
-    check: Check,
-) -> anyhow::Result<Option<Target>> {
-    let Some(error) = error else {
-        return Ok(None);
-    };
-    if !(error > 0.0 && error < 1.0) {
-        anyhow::bail!("--target-error must be in (0, 1), got {error}");
-    }
-    if let Some(limit) = seconds.filter(|s| !(s.is_finite() && *s > 0.0)) {
-        anyhow::bail!("--time-limit must be a positive number of seconds, got {limit}");
-    }
-    if check == Check::Off {
-        anyhow::bail!("--target-error needs the self-check: drop --check off");
-    }
-    Ok(Some(Target { error, seconds }))
-}
-
-/// Loads and solves `scene`, to `target` when there is one.
-fn solve(
-    scene: &std::path::Path,
-    request: &solver::SolveRequest,
-    target: Option<Target>,
-    printer: &ProgressPrinter,
-) -> anyhow::Result<(solver::Solved, Option<TargetReport>)> {
-    let Some(target) = target else {
-        return Ok((solve_file(scene, request, &|p| printer.report(p))?, None));
-    };
-    let clock = std::time::Instant::now();
-    let loaded = solver::load_scene(scene)?;
-    let load = clock.elapsed().as_secs_f64();
-    let (mut solved, report) = solve_to_target(loaded, request, &target, &|p| printer.report(p))?;
-    solved.report.seconds.load = load;
-    solved.report.seconds.total += load;
-    Ok((solved, Some(report)))
 }
 
 impl SolveCommand {
@@ -89,11 +39,11 @@ impl SolveCommand {
             json,
             reference,
             check,
-            target_error,
-            time_limit,
         } = self;
         let request = settings.request().map_err(anyhow::Error::msg)?;
-        let target = target_of(target_error, time_limit, check)?;
+        if request.target.is_some() && check == Check::Off {
+            anyhow::bail!("--target-error needs the self-check: drop --check off");
+        }
         let printer = ProgressPrinter::new();
         let reference = reference
             .map(|path| -> anyhow::Result<Reference> {
@@ -103,7 +53,7 @@ impl SolveCommand {
                     .with_context(|| format!("{}: not a radcast reference", path.display()))
             })
             .transpose()?;
-        let (mut solved, target) = solve(&scene, &request, target, &printer)?;
+        let mut solved = solve_file(&scene, &request, &|p| printer.report(p))?;
         // The bar goes before the summary is printed.
         drop(printer);
         let measured = reference.map(|r| {
@@ -126,20 +76,17 @@ impl SolveCommand {
             ));
         }
         let report = &solved.report;
-        print_warnings(&scene, &request, report, target.as_ref());
+        print_warnings(&scene, &request, report);
         if json {
             let mut value = serde_json::to_value(report).context("serialising the report")?;
             value["peak_memory_bytes"] = HEAP.peak_usage().into();
             if let Some(measured) = measured {
                 value["error"] = serde_json::to_value(measured)?;
             }
-            if let Some(target) = &target {
-                value["target"] = serde_json::to_value(target)?;
-            }
             println!("{value}");
         } else {
             print_summary(&scene, report);
-            if let Some(t) = &target {
+            if let Some(t) = &report.target {
                 println!(
                     "target      {:.1}% smooth RMS {} after {} steps ({})",
                     100.0 * t.error,
@@ -166,12 +113,8 @@ impl SolveCommand {
 
 /// What the user must know about this answer, on stderr: a bad self-check, a target not
 /// reached, what loading changed, a coarser knob than asked, no convergence.
-fn print_warnings(
-    scene: &std::path::Path,
-    request: &solver::SolveRequest,
-    report: &SolveReport,
-    target: Option<&TargetReport>,
-) {
+fn print_warnings(scene: &std::path::Path, request: &solver::SolveRequest, report: &SolveReport) {
+    let target = report.target.as_ref();
     if let Some(warning) = report.estimate.as_ref().and_then(Estimate::warning) {
         eprintln!("warning: {warning}");
     }

@@ -130,6 +130,9 @@ async fn run_origin(
 ) -> anyhow::Result<()> {
     let mut prepared = prepare(&args.scene, request)?;
     prepared.check = args.check == Check::On;
+    if prepared.request.target.is_some() && !prepared.check {
+        anyhow::bail!("--target-error needs the self-check: drop --check off");
+    }
     if !prepared.scene.has_emitter() {
         tracing::warn!(
             "{}: no material emits light (no positive Ke): every value is 0 until an emission edit",

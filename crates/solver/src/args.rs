@@ -5,7 +5,7 @@
 use crate::hierarchy::{HierarchySettings, HierarchyStats};
 use crate::mesh::PatchTarget;
 use crate::pair::{FormFactorSettings, MAX_RAYS_PER_PAIR};
-use crate::solution::request::{MethodChoice, SolveRequest};
+use crate::solution::request::{MethodChoice, SolveRequest, Target};
 use crate::solve::SolverSettings;
 
 /// Everything that decides a solution besides the scene, as flags.
@@ -17,6 +17,45 @@ pub struct SolveArgs {
     /// The hierarchical method's knob and budget.
     #[command(flatten)]
     pub hierarchy: HierarchyArgs,
+    /// An error to refine to.
+    #[command(flatten)]
+    pub target: TargetArgs,
+}
+
+/// `--target-error` and `--time-limit`.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct TargetArgs {
+    /// Refine until the self-check's upper bound on the smooth RMS error is at most this
+    /// (0.05 for 5%): a hierarchy from a coarse knob (0.4), halved each step down to --error,
+    /// refined from where it is; a dense mesh solved again at twice --patches each step. Says
+    /// where it stopped and why (`target` in the JSON).
+    #[arg(long, env = "RADCAST_TARGET_ERROR")]
+    pub target_error: Option<f64>,
+    /// With --target-error: seconds the whole solve may take, about (a step is not started
+    /// when the time spent plus the last step's would pass it).
+    #[arg(long, env = "RADCAST_TIME_LIMIT", requires = "target_error")]
+    pub time_limit: Option<f64>,
+}
+
+impl TargetArgs {
+    /// The target asked for, or the flag whose value is out of range.
+    pub fn target(&self) -> Result<Option<Target>, String> {
+        let Some(error) = self.target_error else {
+            return Ok(None);
+        };
+        if !(error > 0.0 && error < 1.0) {
+            return Err(format!("--target-error must be in (0, 1), got {error}"));
+        }
+        if let Some(limit) = self.time_limit.filter(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(format!(
+                "--time-limit must be a positive number of seconds, got {limit}"
+            ));
+        }
+        Ok(Some(Target {
+            error,
+            seconds: self.time_limit,
+        }))
+    }
 }
 
 /// The mesh, form-factor and solver flags: all of [`SolveArgs`] but the hierarchy's.
@@ -82,7 +121,10 @@ pub enum Check {
 impl SolveArgs {
     /// The request these flags ask for, or the first flag whose value is out of range.
     pub fn request(&self) -> Result<SolveRequest, String> {
-        self.solver.request(self.hierarchy.settings()?)
+        Ok(SolveRequest {
+            target: self.target.target()?,
+            ..self.solver.request(self.hierarchy.settings()?)?
+        })
     }
 }
 

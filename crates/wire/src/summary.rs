@@ -61,6 +61,9 @@ pub struct SolveReport {
     /// keeps it); absent when the check is off.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimate: Option<ErrorEstimate>,
+    /// How the solve to `--target-error` went, when the server was started with one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<TargetOutcome>,
 }
 
 /// Wall-clock seconds per stage of a solve.
@@ -140,4 +143,33 @@ pub struct ReadingError {
     pub high: f64,
     /// `sum B / sum B_traced - 1` over the probes: the energy balance.
     pub energy: f64,
+}
+
+/// How a solve to a target went: each step's self-check, and why refinement stopped.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TargetOutcome {
+    /// The smooth RMS error asked for.
+    pub error: f64,
+    /// Whether the last step's upper bound reached it.
+    pub reached: bool,
+    /// `reached`, `time limit`, `finest knob`, `budget` or `matrix limit`.
+    pub stopped: String,
+    /// Each solve and its check, coarsest first.
+    pub steps: Vec<TargetStepOutcome>,
+}
+
+/// One step toward a target.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TargetStepOutcome {
+    /// The hierarchy's knob (absent for a dense step).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub knob: Option<f64>,
+    /// Patches (leaves) solved for.
+    pub patches: usize,
+    /// Seconds from the start to the end of this step's check.
+    pub seconds: f64,
+    /// The estimated smooth RMS error.
+    pub rms: f64,
+    /// The upper end of its interval.
+    pub high: f64,
 }

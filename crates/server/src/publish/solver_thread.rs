@@ -100,28 +100,17 @@ pub fn solve_and_publish(
         return Ok(EditBase::Cached(radiosity));
     }
     let log = ProgressLog::default();
-    let mut session = prepared.session(&|p| log.report(p))?;
-    if prepared.request.hierarchy.is_some() {
-        // The leaves replace the input faces viewers have held while refinement ran.
-        hub.replace_geometry(geometry_of(&prepared.scene, session.mesh()));
-        hub.publish(&emission_only(session.mesh()), false);
-    }
-    let mesh = session.mesh().clone();
-    let last_snapshot = Mutex::new(Instant::now());
-    let progress = |p: Progress| {
-        log.report(p);
-        if let Progress::Estimate { radiosity } = p
-            && let Ok(mut last) = last_snapshot.try_lock()
-            && last.elapsed() >= SNAPSHOT_INTERVAL
-        {
-            *last = Instant::now();
-            // Not final: the patches' means at the corners will do until the direct gather.
-            hub.publish(&to_f32(&mesh.corner_means(radiosity)), false);
-        }
+    let (session, mut report) = match &prepared.request.target {
+        Some(target) => steps_to_target(prepared, shared, &log, target)?,
+        None => first_solve(prepared, shared, &log)?,
     };
-    let mut report = session.solve(&progress);
-    if prepared.check {
-        report.estimate = Some(check(&session, shared, report.seconds.total));
+    match &report.estimate {
+        // A solve to a target checked its last step.
+        Some(estimate) => judge(shared, estimate.smooth.rms, estimate.smooth.low),
+        None if prepared.check => {
+            report.estimate = Some(check(&session, shared, report.seconds.total));
+        }
+        None => {}
     }
     let radiosity = to_f32(session.radiosity());
     let vertex_radiosity = finite(to_f32(&session.vertex_radiosity()))?;
@@ -171,6 +160,63 @@ pub fn solve_and_publish(
         }
     }
     Ok(EditBase::Live(Box::new(session)))
+}
+
+/// The first solve at the settings asked, its progress served as frames that are not final.
+fn first_solve(
+    prepared: &Prepared,
+    shared: &Shared,
+    log: &ProgressLog,
+) -> anyhow::Result<(Session, solver::SolveReport)> {
+    let hub = &shared.hub;
+    let mut session = prepared.session(&|p| log.report(p))?;
+    if prepared.request.hierarchy.is_some() {
+        // The leaves replace the input faces viewers have held while refinement ran.
+        hub.replace_geometry(geometry_of(&prepared.scene, session.mesh()));
+        hub.publish(&emission_only(session.mesh()), false);
+    }
+    let mesh = session.mesh().clone();
+    let last_snapshot = Mutex::new(Instant::now());
+    let progress = |p: Progress| {
+        log.report(p);
+        if let Progress::Estimate { radiosity } = p
+            && let Ok(mut last) = last_snapshot.try_lock()
+            && last.elapsed() >= SNAPSHOT_INTERVAL
+        {
+            *last = Instant::now();
+            // Not final: the patches' means at the corners will do until the direct gather.
+            hub.publish(&to_f32(&mesh.corner_means(radiosity)), false);
+        }
+    };
+    let report = session.solve(&progress);
+    Ok((session, report))
+}
+
+/// Solves toward `target` ([`solver::session_to_target`]), serving each step's answer as it
+/// comes, not final, with its leaves or mesh: viewers see the picture sharpen.
+fn steps_to_target(
+    prepared: &Prepared,
+    shared: &Shared,
+    log: &ProgressLog,
+    target: &solver::Target,
+) -> anyhow::Result<(Session, solver::SolveReport)> {
+    let hub = &shared.hub;
+    let mut publish_step = |session: &Session| {
+        let geometry = geometry_of(&prepared.scene, session.mesh());
+        if geometry != *hub.geometry().model {
+            hub.replace_geometry(geometry);
+        }
+        if let Ok(values) = finite(to_f32(&session.vertex_radiosity())) {
+            hub.publish(&values, false);
+        }
+    };
+    Ok(solver::session_to_target(
+        &prepared.scene,
+        &prepared.request,
+        target,
+        &|p| log.report(p),
+        &mut publish_step,
+    )?)
 }
 
 /// Publishes `prepared`'s solution from the cache in `dir` when an entry proves to be this

@@ -5,6 +5,7 @@ use solver::{Mesh, Rgb, Scene};
 use wire::geometry::{NO_CORNER, NO_TEXTURE, SurfaceTextures};
 use wire::summary::{
     ErrorEstimate, HierarchyCounts, ObjectRadiosity, ReadingError, SolveReport, StageSeconds,
+    TargetOutcome, TargetStepOutcome,
 };
 use wire::{Camera, Geometry};
 
@@ -121,6 +122,22 @@ pub fn report_for_viewers(report: &solver::SolveReport) -> SolveReport {
             link_budget_reached: h.link_budget_reached,
         }),
         estimate: report.estimate.as_ref().map(estimate_for_viewers),
+        target: report.target.as_ref().map(|t| TargetOutcome {
+            error: t.error,
+            reached: t.reached,
+            stopped: t.stopped.to_string(),
+            steps: t
+                .steps
+                .iter()
+                .map(|s| TargetStepOutcome {
+                    knob: s.knob,
+                    patches: s.patches,
+                    seconds: s.seconds,
+                    rms: s.rms,
+                    high: s.high,
+                })
+                .collect(),
+        }),
     }
 }
 

@@ -79,6 +79,11 @@ pub fn solve_scene(
     if let Some(text) = chosen {
         progress(Progress::Notice { text });
     }
+    if let Some(target) = &request.target {
+        let (session, report) =
+            super::target::session_to_target(&scene, request, target, progress, &mut |_| {})?;
+        return Ok(Solved::kept(scene, session, report));
+    }
     let start = Instant::now();
     let mesh = starting_mesh(&scene, request)?;
     let mesh_seconds = start.elapsed().as_secs_f64();

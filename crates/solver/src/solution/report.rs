@@ -65,4 +65,38 @@ pub struct SolveReport {
     /// The self-check of this answer ([`crate::check`]), when one was run.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub estimate: Option<Estimate>,
+    /// How a solve to a target went ([`super::target`]), when one was asked.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target: Option<TargetReport>,
+}
+
+/// How a solve to a target went.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TargetReport {
+    /// The error asked for.
+    pub error: f64,
+    /// Whether the last step's upper bound reached it.
+    pub reached: bool,
+    /// Why refinement stopped: `reached`, `time limit`, `finest knob` (the `--error` floor),
+    /// `budget` (leaves or links) or `matrix limit` (a finer dense mesh does not fit).
+    pub stopped: &'static str,
+    /// Each solve and its check, coarsest first.
+    pub steps: Vec<TargetStep>,
+}
+
+/// One solve on the way to a target, and what its check said.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct TargetStep {
+    /// The hierarchy's error knob as refinement ended it (coarser than the step asked where
+    /// a budget made it so; absent for dense steps).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub knob: Option<f64>,
+    /// Patches (leaves) solved for.
+    pub patches: usize,
+    /// Seconds since the start when this step's check ended.
+    pub seconds: f64,
+    /// The estimated smooth RMS error.
+    pub rms: f64,
+    /// The upper end of its interval.
+    pub high: f64,
 }

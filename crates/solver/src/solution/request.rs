@@ -25,6 +25,19 @@ pub struct SolveRequest {
     /// The method is chosen from the scene once it is loaded ([`SolveRequest::for_scene`]):
     /// dense with `solver` on `patches`, or hierarchical with `hierarchy`.
     pub auto: bool,
+    /// Refine until the self-check says the answer is within this ([`super::target`]); then
+    /// `hierarchy.error` is the finest knob and `patches` the coarsest mesh.
+    pub target: Option<Target>,
+}
+
+/// What `--target-error` asks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Target {
+    /// The smooth RMS error (relative) the self-check's upper bound must reach.
+    pub error: f64,
+    /// Seconds the whole solve may take, about: a step is not started when the time spent
+    /// plus the last step's would pass it.
+    pub seconds: Option<f64>,
 }
 
 impl Default for SolveRequest {
@@ -36,6 +49,7 @@ impl Default for SolveRequest {
             max_matrix_bytes: 8 << 30,
             hierarchy: None,
             auto: false,
+            target: None,
         }
     }
 }

@@ -658,6 +658,7 @@ impl Session {
                 .collect(),
             hierarchy: self.hierarchy_stats(),
             estimate: None,
+            target: None,
         }
     }
 }
