@@ -15,7 +15,7 @@ use crate::transport::Transport;
 use crate::visibility::Occluders;
 use crate::{Progress, no_progress};
 use glam::DVec3;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::time::Instant;
 
 /// How a session moves light between patches.
@@ -45,6 +45,9 @@ pub struct Session {
     factors: Factors,
     /// Direct light at the mesh corners, for the values viewers are sent.
     corner_light: CornerLight,
+    /// The objects whose direct light `corner_light` gathers: those that emitted when the
+    /// session began or have been set to emit since (off now or not).
+    lights: BTreeSet<u32>,
     /// The solution for the scene's own emission.
     base: Vec<Rgb>,
     /// Its relative residual (infinite before the first solve).
@@ -269,7 +272,13 @@ impl Session {
         let column =
             |f: fn(&crate::mesh::Patch) -> Rgb| mesh.patches.iter().map(f).collect::<Vec<_>>();
         let clock = Instant::now();
-        let corner_light = CornerLight::new(&scene, &mesh, occluders);
+        let lights: BTreeSet<u32> = scene
+            .faces
+            .iter()
+            .filter(|f| f.emission.max_element() > 0.0)
+            .map(|f| f.object)
+            .collect();
+        let corner_light = CornerLight::new(&scene, &mesh, occluders, &lights);
         let mut seconds = seconds;
         seconds.form_factors += clock.elapsed().as_secs_f64();
         Session {
@@ -285,6 +294,7 @@ impl Session {
             responses: BTreeMap::new(),
             edited: BTreeMap::new(),
             seconds,
+            lights,
             triangles: scene.triangle_count(),
             skipped_faces: scene.skipped_degenerate_faces,
             radiosity,
@@ -389,7 +399,8 @@ impl Session {
                     &moved,
                     crate::geometry::bounds(swept),
                 );
-                self.corner_light = CornerLight::new(&self.scene, &self.mesh, &occluders);
+                self.corner_light =
+                    CornerLight::new(&self.scene, &self.mesh, &occluders, &self.lights);
                 Ok(MoveReport {
                     work: MoveWork::Dense(stats),
                     seconds: clock.elapsed().as_secs_f64(),
@@ -398,10 +409,11 @@ impl Session {
             Factors::Hierarchy(_) => {
                 // Refinement depends on where light falls, so the hierarchy is built again: new
                 // leaves, which viewers get as a new geometry.
-                let seconds = self.seconds;
+                let (seconds, lights) = (self.seconds, std::mem::take(&mut self.lights));
                 *self = Session::hierarchical(&self.scene, &self.request, &no_progress)
                     .expect("this session's method already ran on a hierarchy");
                 self.seconds = seconds;
+                self.keep_lights(lights);
                 let stats = self.hierarchy_stats().expect("a hierarchical session");
                 Ok(MoveReport {
                     work: MoveWork::Rebuilt(stats),
@@ -480,7 +492,45 @@ impl Session {
         let object = self.object_index(name)?;
         check_emission(emission.to_array()).map_err(EditError::InvalidEmission)?;
         self.edited.insert(object, emission);
+        if emission.max_element() > 0.0 {
+            self.keep_lights(BTreeSet::from([object]));
+        }
         Ok(())
+    }
+
+    /// Gathers the direct light of `lights` too from now on (see [`Session::lights`]): when
+    /// that adds one, the corners' factors are gathered again, and every vertex value kept
+    /// for summing with them.
+    fn keep_lights(&mut self, lights: BTreeSet<u32>) {
+        if lights.is_subset(&self.lights) {
+            return;
+        }
+        self.lights.extend(lights);
+        // Gathered at the emissions as edited: each emitter's share of the rays is what a
+        // fresh solve of the edited scene gives it.
+        let mut lit = self.scene.clone();
+        for face in &mut lit.faces {
+            if let Some(emission) = self.edited.get(&face.object) {
+                face.emission = *emission;
+            }
+        }
+        let occluders = Occluders::new(&lit);
+        self.corner_light = CornerLight::new(&lit, &self.mesh, &occluders, &self.lights);
+        // The vertex values summed so far, gathered again alike (each light's share of the
+        // rays may have changed with the new one).
+        if self.base_vertices.is_some() {
+            self.base_vertices = Some(self.linear_vertices(&self.base, &self.emission));
+        }
+        let objects: Vec<u32> = self.responses.keys().copied().collect();
+        for object in objects {
+            let (unit_emission, original_emission) = self.response_emissions(object);
+            let response = &self.responses[&object];
+            let unit_vertices = self.linear_vertices(&response.unit, &unit_emission);
+            let original_vertices = self.linear_vertices(&response.original, &original_emission);
+            let response = self.responses.get_mut(&object).expect("listed above");
+            response.unit_vertices = unit_vertices;
+            response.original_vertices = original_vertices;
+        }
     }
 
     /// Solves for `emission` from `initial` (or zero).
@@ -506,11 +556,8 @@ impl Session {
         .expect("method checked when the session was made")
     }
 
-    /// Computes the responses of `object` unless known; returns the solver iterations spent.
-    fn ensure_response(&mut self, object: u32) -> usize {
-        if self.responses.contains_key(&object) {
-            return 0;
-        }
+    /// The emission of `object`'s two responses, per patch: one W/m^2, and as loaded.
+    fn response_emissions(&self, object: u32) -> (Vec<Rgb>, Vec<Rgb>) {
         let mask = |value: &dyn Fn(usize) -> Rgb| -> Vec<Rgb> {
             (0..self.emission.len())
                 .map(|i| {
@@ -522,9 +569,16 @@ impl Session {
                 })
                 .collect()
         };
-        let unit_emission = mask(&|_| Rgb::ONE);
+        (mask(&|_| Rgb::ONE), mask(&|i| self.emission[i]))
+    }
+
+    /// Computes the responses of `object` unless known; returns the solver iterations spent.
+    fn ensure_response(&mut self, object: u32) -> usize {
+        if self.responses.contains_key(&object) {
+            return 0;
+        }
+        let (unit_emission, original_emission) = self.response_emissions(object);
         let unit = self.solve_for(&unit_emission, None, &no_progress);
-        let original_emission = mask(&|i| self.emission[i]);
         let (mut iterations, mut residual) = (unit.iterations, unit.residual);
         // Uniform original emission needs no second solve: its response is e * G.
         let first = original_emission

@@ -22,6 +22,7 @@ use crate::transport::Transport;
 use crate::visibility::Occluders;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::collections::BTreeSet;
 
 /// Shadow rays per corner and emitter: the first ones decide alone when they all agree, the
 /// rest sample a penumbra. An emitter that gives a corner less than [`MINOR_SHARE`] of its
@@ -101,13 +102,20 @@ pub struct CornerLight {
 }
 
 impl CornerLight {
-    /// Gathers the emitters of `scene` at the corners of `mesh` (built from it).
-    pub fn new(scene: &Scene, mesh: &Mesh, occluders: &Occluders) -> CornerLight {
+    /// Gathers the emitters of `scene` at the corners of `mesh` (built from it): the faces
+    /// that emit, and every face of the objects in `lights` (a light turned off keeps its
+    /// place, so that turning it on again finds its direct light gathered).
+    pub fn new(
+        scene: &Scene,
+        mesh: &Mesh,
+        occluders: &Occluders,
+        lights: &BTreeSet<u32>,
+    ) -> CornerLight {
         let emitters: Vec<Emitter> = scene
             .faces
             .iter()
             .enumerate()
-            .filter(|(_, f)| f.emission.max_element() > 0.0)
+            .filter(|(_, f)| f.emission.max_element() > 0.0 || lights.contains(&f.object))
             .map(|(i, f)| Emitter {
                 polygon: f.polygon,
                 normal: f.polygon.normal(),
@@ -506,7 +514,12 @@ mod tests {
                 .iter()
                 .position(|p| p.distance(dvec3(1.0, 0.0, 1.0)) < 1e-12)
                 .expect("a floor vertex under the lamp's corner");
-            let light = CornerLight::new(&scene, &solved.mesh, &Occluders::new(&scene));
+            let light = CornerLight::new(
+                &scene,
+                &solved.mesh,
+                &Occluders::new(&scene),
+                &std::collections::BTreeSet::new(),
+            );
             let face_emission = [Rgb::ZERO, Rgb::splat(10.0)];
             let got = light.corners.irradiance(&face_emission)[corner];
             println!("hierarchical {hierarchical}: {got} W/m^2 against Howell B-3 {expected}");
