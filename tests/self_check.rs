@@ -146,3 +146,35 @@ fn a_solve_to_a_target_stops_within_it_and_is_within_it_on_the_cornell_box() {
         );
     }
 }
+
+/// A hierarchy solved to a target is built again after a move at the knob the run reached,
+/// not at the `--error` floor it did not need.
+#[test]
+fn a_move_rebuilds_a_hierarchy_solved_to_a_target_at_the_knob_it_reached() {
+    let target = solver::Target {
+        error: 0.08,
+        seconds: None,
+    };
+    let request = SolveRequest {
+        target: Some(target),
+        ..SolveRequest::default().with_method(
+            solver::MethodChoice::Hierarchical,
+            solver::HierarchySettings::default(),
+        )
+    };
+    let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).unwrap();
+    let (mut session, report) =
+        solver::session_to_target(&scene, &request, &target, &solver::no_progress, &mut |_| {})
+            .unwrap();
+    let run = report.target.expect("a target was asked");
+    let reached = run.steps.last().unwrap().knob.unwrap();
+    assert!(
+        run.steps.len() >= 2 && reached > request.hierarchy.unwrap().error,
+        "refined further, and stopped before the floor: {run:?}"
+    );
+    session
+        .move_object("short_block", glam::dvec3(20.0, 0.0, 0.0))
+        .unwrap();
+    let moved = session.solve(&solver::no_progress);
+    assert_eq!(moved.hierarchy.unwrap().knob_used, reached);
+}

@@ -6,7 +6,7 @@ use super::request::{SolveError, SolveRequest, check_dense_size};
 use super::vertices::{CornerLight, clamp_below_zero};
 use crate::check::{CheckSettings, Estimate};
 use crate::form_factors::{DenseFormFactors, UpdateStats};
-use crate::hierarchy::{BuiltHierarchy, Hierarchy, HierarchyStats};
+use crate::hierarchy::{BuiltHierarchy, Hierarchy, HierarchySettings, HierarchyStats};
 use crate::mesh::Mesh;
 use crate::scene::motion::{Motion, reach_after};
 use crate::scene::{MAX_COORDINATE, Rgb, Scene, check_emission};
@@ -248,6 +248,14 @@ impl Session {
         )?;
         seconds.form_factors += clock.elapsed().as_secs_f64();
         let mesh = hierarchy.leaf_mesh();
+        // Refined to `knob` now: a move rebuilds the hierarchy at it.
+        let request = SolveRequest {
+            hierarchy: Some(HierarchySettings {
+                error: knob,
+                ..settings
+            }),
+            ..request
+        };
         let session = Session::assemble(
             scene,
             mesh,
