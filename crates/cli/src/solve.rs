@@ -23,7 +23,7 @@ pub struct SolveCommand {
     /// Also measure the error against this reference file (adds `error` to the JSON).
     #[arg(long)]
     pub reference: Option<PathBuf>,
-    /// After the solve, estimate its error against probes path-traced for it (64 to 1,024
+    /// After the solve, estimate its error against probes path-traced for it (64 to 4,096
     /// probes x 1,024 paths, as many as a tenth of the solve's time allows; a seed of their
     /// own; `estimate` in the JSON); `off` skips it.
     #[arg(long, value_enum, default_value_t = Check::On)]
