@@ -98,33 +98,18 @@ impl ProgressPrinter {
     }
 }
 
-/// Moves the bar to where `progress` says the stage is.
+/// Moves the bar to where `progress` says the stage is: a count out of its total, or the
+/// stage's own line beside a spinner.
 fn draw(bar: &ProgressBar, progress: &Progress) {
     match *progress {
         Progress::FormFactors { done, total } | Progress::Probes { done, total } => {
             bar.set_length(total as u64);
             bar.set_position(done as u64);
         }
-        Progress::Solve {
-            iteration,
-            residual,
-        } => {
-            bar.set_message(format!("iteration {iteration}, residual {residual:.2e}"));
+        _ => {
+            bar.set_message(progress.describe().unwrap_or_default());
             bar.tick();
         }
-        Progress::Refining {
-            knob,
-            leaves,
-            links,
-            undecided,
-            ..
-        } => {
-            bar.set_message(format!(
-                "error {knob}: {leaves} leaves, {links} links, {undecided} pairs to decide"
-            ));
-            bar.tick();
-        }
-        _ => {}
     }
 }
 

@@ -125,10 +125,11 @@ pub fn parse_edit(
         }
         Field::Move => {
             let shape = "body must be JSON like {\"translate\": [x, y, z]} and/or {\"rotate\": {\"axis\": [x, y, z], \"degrees\": d}}, with \"pivot\": [x, y, z] optional";
-            let motion: solver::Motion =
+            let value: serde_json::Value =
                 serde_json::from_slice(body).map_err(|e| bad(format!("{shape}: {e}")))?;
-            let named = serde_json::from_slice::<serde_json::Value>(body)
-                .is_ok_and(|v| v.get("translate").is_some() || v.get("rotate").is_some());
+            let named = value.get("translate").is_some() || value.get("rotate").is_some();
+            let motion: solver::Motion =
+                serde_json::from_value(value).map_err(|e| bad(format!("{shape}: {e}")))?;
             if !named {
                 return Err(bad(shape.to_string()));
             }
