@@ -28,6 +28,30 @@ pub(crate) fn closed_cube() -> Scene {
     scene
 }
 
+/// A unit square lamp 10 m above a unit square floor, and a screen at `height` that hides
+/// the lamp beyond `edge` (in x) from the floor's view straight up.
+pub(crate) fn screened_lamp(height: f64, edge: f64) -> Scene {
+    let mut scene = Scene::default();
+    let grey = Material {
+        reflectance: Rgb::splat(0.5),
+        emission: Rgb::ZERO,
+    };
+    let lamp = Material {
+        emission: Rgb::ONE,
+        ..grey
+    };
+    let (x, y) = (DVec3::X, DVec3::Y);
+    add_parallelogram(&mut scene, "floor", (DVec3::ZERO, x, y), grey);
+    add_parallelogram(&mut scene, "lamp", (dvec3(0.0, 0.0, 10.0), y, x), lamp);
+    add_parallelogram(
+        &mut scene,
+        "screen",
+        (dvec3(-5.0, -5.0, height), y * 10.0, x * (5.0 + edge)),
+        grey,
+    );
+    scene
+}
+
 /// The hierarchy of `scene` built at error knob `error`, other settings at their defaults.
 pub(crate) fn build(scene: &Scene, error: f64) -> Hierarchy {
     let occluders = Occluders::new(scene);

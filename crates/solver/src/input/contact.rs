@@ -88,10 +88,19 @@ impl EdgeGrid {
                 .flat_map(|f| f.polygon.corners().iter().copied()),
         );
         let side = (hi - lo).max_element().max(f64::MIN_POSITIVE);
-        let mean_area = faces.iter().map(|f| f.polygon.area()).sum::<f64>() / faces.len() as f64;
+        // The median face's size, not the mean's: a ground of hundreds of square metres under
+        // a model of centimetre triangles made the mean's cells hold thousands of edges each,
+        // and finding the contacts took 7 of the 7.8 s a 13,776-triangle teddy bear took to load
+        // (0.7 s now).
+        let mut areas: Vec<f64> = faces.iter().map(|f| f.polygon.area()).collect();
+        let middle = areas.len() / 2;
+        let median_area = match areas.is_empty() {
+            true => 0.0,
+            false => *areas.select_nth_unstable_by(middle, f64::total_cmp).1,
+        };
         let mut grid = EdgeGrid {
             origin: lo,
-            cell: mean_area.sqrt().max(side / MAX_CELLS_PER_SIDE),
+            cell: median_area.sqrt().max(side / MAX_CELLS_PER_SIDE),
             cells: HashMap::new(),
         };
         for (f, face) in faces.iter().enumerate() {
