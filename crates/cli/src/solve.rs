@@ -3,7 +3,7 @@
 use crate::{HEAP, ProgressPrinter};
 use anyhow::Context;
 use solver::accuracy::evaluate;
-use solver::args::{Check, SolveArgs, budget_warnings};
+use solver::args::{SolveArgs, budget_warnings};
 use solver::check::{CheckSettings, Estimate, ReadingEstimate, self_check};
 use solver::reference::Reference;
 use solver::visibility::Occluders;
@@ -23,11 +23,6 @@ pub struct SolveCommand {
     /// Also measure the error against this reference file (adds `error` to the JSON).
     #[arg(long)]
     pub reference: Option<PathBuf>,
-    /// After the solve, estimate its error against probes path-traced for it (64 to 4,096
-    /// probes x 1,024 paths, as many as a tenth of the solve's time allows; a seed of their
-    /// own; `estimate` in the JSON); `off` skips it.
-    #[arg(long, value_enum, default_value_t = Check::On)]
-    pub check: Check,
 }
 
 impl SolveCommand {
@@ -38,12 +33,8 @@ impl SolveCommand {
             settings,
             json,
             reference,
-            check,
         } = self;
         let request = settings.request().map_err(anyhow::Error::msg)?;
-        if request.target.is_some() && check == Check::Off {
-            anyhow::bail!("--target-error needs the self-check: drop --check off");
-        }
         let printer = ProgressPrinter::new();
         let reference = reference
             .map(|path| -> anyhow::Result<Reference> {
@@ -66,7 +57,7 @@ impl SolveCommand {
             )
         });
         // A solve to a target has checked its last step already.
-        if check == Check::On && solved.report.estimate.is_none() {
+        if settings.checked() && solved.report.estimate.is_none() {
             solved.report.estimate = Some(self_check(
                 &solved.scene,
                 &Occluders::new(&solved.scene),

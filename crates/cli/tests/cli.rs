@@ -545,8 +545,12 @@ fn a_solve_to_a_target_says_where_it_stopped_and_refuses_what_cannot_work() {
             "--target-error needs the self-check: drop --check off",
         ),
         (
-            &["--time-limit", "10"],
-            "the following required arguments were not provided",
+            &["--time-limit", "10", "--patches", "500"],
+            "--time-limit bounds a solve to a target: give --target-error",
+        ),
+        (
+            &["--target-error", "five"],
+            "expected a number or `off`, got \"five\"",
         ),
     ] {
         let output = radcast(&[&["solve", "scenes/cornell-box.obj"][..], args].concat());
@@ -554,4 +558,42 @@ fn a_solve_to_a_target_says_where_it_stopped_and_refuses_what_cannot_work() {
         let stderr = String::from_utf8_lossy(&output.stderr);
         assert!(stderr.contains(reason), "{args:?}: {stderr}");
     }
+}
+
+#[test]
+fn with_no_resolution_asked_a_solve_goes_to_five_per_cent_and_with_one_it_solves_once() {
+    // Nothing fixes the resolution: the default target holds.
+    let (report, _) = radcast_json(&["solve", "scenes/shadow-slab.obj", "--json"]);
+    assert_eq!(report["target"]["error"], 0.05, "{report}");
+    // --patches, --patch-size or --error fix it, and so does `--target-error off` or
+    // `--check off`: one solve, at what was asked.
+    for args in [
+        &["--patches", "300"][..],
+        &["--patch-size", "0.5"],
+        &["--method", "hierarchical", "--error", "0.3"],
+        &["--target-error", "off"],
+        &["--check", "off"],
+    ] {
+        let (report, _) =
+            radcast_json(&[&["solve", "scenes/shadow-slab.obj", "--json"][..], args].concat());
+        assert!(report.get("target").is_none(), "{args:?}: {report}");
+    }
+    // Asked for with a resolution, the target holds, from that resolution.
+    let (report, _) = radcast_json(&[
+        "solve",
+        "scenes/shadow-slab.obj",
+        "--patches",
+        "300",
+        "--target-error",
+        "0.2",
+        "--json",
+    ]);
+    assert_eq!(report["target"]["error"], 0.2, "{report}");
+    assert_eq!(
+        report["target"]["steps"][0]["patches"]
+            .as_u64()
+            .map(|p| p.abs_diff(300) <= 30),
+        Some(true),
+        "{report}"
+    );
 }

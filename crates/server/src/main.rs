@@ -6,7 +6,7 @@ use server::http::listen;
 use server::publish::prepare::{prepare, shared_for};
 use server::publish::solver_thread;
 use server::{Limits, fanout};
-use solver::args::{Check, SolveArgs};
+use solver::args::SolveArgs;
 use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -28,11 +28,6 @@ struct Args {
     addr: String,
     #[command(flatten)]
     solve: SolveArgs,
-    /// After the solve and after each move, estimate the error of what viewers see against
-    /// probes path-traced for it (about a tenth of the solve's time; `report.estimate` in
-    /// `/api/solution`, `/metrics` gauges, `/healthz` degraded past 5%); `off` skips it.
-    #[arg(long, env = "RADCAST_CHECK", value_enum, default_value_t = Check::On)]
-    check: Check,
     /// Folder for cached solutions (keyed by scene content and settings).
     #[arg(long, env = "RADCAST_CACHE_DIR", default_value = "cache")]
     cache_dir: PathBuf,
@@ -129,10 +124,7 @@ async fn run_origin(
     limits: Limits,
 ) -> anyhow::Result<()> {
     let mut prepared = prepare(&args.scene, request)?;
-    prepared.check = args.check == Check::On;
-    if prepared.request.target.is_some() && !prepared.check {
-        anyhow::bail!("--target-error needs the self-check: drop --check off");
-    }
+    prepared.check = args.solve.checked();
     if !prepared.scene.has_emitter() {
         tracing::warn!(
             "{}: no material emits light (no positive Ke): every value is 0 until an emission edit",

@@ -6,6 +6,10 @@ use crate::hierarchy::{HierarchySettings, HierarchyStats};
 use crate::mesh::PatchTarget;
 use crate::pair::{FormFactorSettings, MAX_RAYS_PER_PAIR};
 use crate::solution::request::{MethodChoice, SolveRequest, Target};
+use crate::solution::target::DEFAULT_TARGET_ERROR;
+
+/// Patches a dense solve starts from when --patches and --patch-size are not given.
+pub const DEFAULT_PATCHES: usize = 1000;
 use crate::solve::SolverSettings;
 
 /// Everything that decides a solution besides the scene, as flags.
@@ -17,33 +21,68 @@ pub struct SolveArgs {
     /// The hierarchical method's knob and budget.
     #[command(flatten)]
     pub hierarchy: HierarchyArgs,
-    /// An error to refine to.
+    /// The self-check and the error it steers the solve to.
     #[command(flatten)]
-    pub target: TargetArgs,
+    pub check: CheckArgs,
 }
 
-/// `--target-error` and `--time-limit`.
-#[derive(clap::Args, Clone, Debug, Default)]
-pub struct TargetArgs {
+/// `--check`, `--target-error` and `--time-limit`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct CheckArgs {
+    /// After the solve (and on the server after each move), estimate the error of what
+    /// viewers see against probes path-traced for it: 64 to 4,096 probes x 1,024 paths, as
+    /// many as a tenth of the solve's time allows, a seed of their own (`estimate` in the JSON
+    /// and in /api/solution, /metrics gauges, /healthz degraded past 5%). `off` skips it, and
+    /// with it the default target.
+    #[arg(long, env = "RADCAST_CHECK", value_enum, default_value_t = Check::On)]
+    pub check: Check,
     /// Refine until the self-check's upper bound on the smooth RMS error is at most this
     /// (0.05 for 5%): a hierarchy from a coarse knob (0.4), halved each step down to --error,
     /// refined from where it is; a dense mesh solved again at twice --patches each step. Says
-    /// where it stopped and why (`target` in the JSON).
-    #[arg(long, env = "RADCAST_TARGET_ERROR")]
-    pub target_error: Option<f64>,
-    /// With --target-error: seconds the whole solve may take, about (a step is not started
-    /// when the time spent plus the last step's would pass it).
-    #[arg(long, env = "RADCAST_TIME_LIMIT", requires = "target_error")]
+    /// where it stopped and why (`target` in the JSON). The default, 0.05, holds while the
+    /// check is on and no --patches, --patch-size or --error fixes the resolution; `off`
+    /// solves once at the resolution asked.
+    #[arg(long, env = "RADCAST_TARGET_ERROR", value_parser = parse_target_error)]
+    pub target_error: Option<TargetError>,
+    /// Seconds a solve to a target may take, about (a step is not started when the time spent
+    /// plus the last step's would pass it).
+    #[arg(long, env = "RADCAST_TIME_LIMIT")]
     pub time_limit: Option<f64>,
 }
 
-impl TargetArgs {
-    /// The target asked for, or the flag whose value is out of range.
-    pub fn target(&self) -> Result<Option<Target>, String> {
-        let Some(error) = self.target_error else {
-            return Ok(None);
+/// `--target-error`'s value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TargetError {
+    /// No target: one solve at the resolution asked.
+    Off,
+    /// This relative smooth RMS error.
+    At(f64),
+}
+
+/// `off`, or a number (checked for range by [`CheckArgs::target`], which names the flag).
+fn parse_target_error(text: &str) -> Result<TargetError, String> {
+    match text {
+        "off" => Ok(TargetError::Off),
+        _ => text
+            .parse()
+            .map(TargetError::At)
+            .map_err(|_| format!("expected a number or `off`, got {text:?}")),
+    }
+}
+
+impl CheckArgs {
+    /// The target asked for, or the default one where the resolution is not `fixed` by a
+    /// flag and the check is on; or the flag whose value is out of range or out of place.
+    pub fn target(&self, fixed: bool) -> Result<Option<Target>, String> {
+        let error = match (self.target_error, self.check) {
+            (Some(TargetError::At(_)), Check::Off) => {
+                return Err("--target-error needs the self-check: drop --check off".into());
+            }
+            (Some(TargetError::At(error)), Check::On) => Some(error),
+            (None, Check::On) if !fixed => Some(DEFAULT_TARGET_ERROR),
+            (Some(TargetError::Off), _) | (None, _) => None,
         };
-        if !(error > 0.0 && error < 1.0) {
+        if let Some(error) = error.filter(|e| !(*e > 0.0 && *e < 1.0)) {
             return Err(format!("--target-error must be in (0, 1), got {error}"));
         }
         if let Some(limit) = self.time_limit.filter(|s| !(s.is_finite() && *s > 0.0)) {
@@ -51,24 +90,27 @@ impl TargetArgs {
                 "--time-limit must be a positive number of seconds, got {limit}"
             ));
         }
-        Ok(Some(Target {
-            error,
-            seconds: self.time_limit,
-        }))
+        match error {
+            None if self.time_limit.is_some() => Err("--time-limit bounds a solve to a \
+                target: give --target-error (no target is set by default once --patches, \
+                --patch-size or --error fixes the resolution, or with --check off)"
+                .into()),
+            None => Ok(None),
+            Some(error) => Ok(Some(Target {
+                error,
+                seconds: self.time_limit,
+            })),
+        }
     }
 }
 
 /// The mesh, form-factor and solver flags: all of [`SolveArgs`] but the hierarchy's.
 #[derive(clap::Args, Clone, Debug)]
 pub struct SolverArgs {
-    /// Target number of patches (dense methods).
-    #[arg(
-        long,
-        env = "RADCAST_PATCHES",
-        default_value_t = 1000,
-        conflicts_with = "patch_size"
-    )]
-    pub patches: usize,
+    /// Target number of patches (dense methods) [default: 1000; given, it fixes the
+    /// resolution: no default --target-error].
+    #[arg(long, env = "RADCAST_PATCHES", conflicts_with = "patch_size")]
+    pub patches: Option<usize>,
     /// Target patch edge length in scene units (instead of --patches).
     #[arg(long, env = "RADCAST_PATCH_SIZE")]
     pub patch_size: Option<f64>,
@@ -95,9 +137,11 @@ pub struct SolverArgs {
 /// The hierarchical method's flags.
 #[derive(clap::Args, Clone, Debug)]
 pub struct HierarchyArgs {
-    /// With --method hierarchical: the relative error a link may carry; smaller refines more.
-    #[arg(long, env = "RADCAST_ERROR", default_value_t = HierarchySettings::default().error)]
-    pub error: f64,
+    /// With --method hierarchical: the relative error a link may carry; smaller refines more
+    /// [default: 0.03; given, it fixes the resolution: no default --target-error; with one,
+    /// the finest knob a solve to it may reach].
+    #[arg(long, env = "RADCAST_ERROR")]
+    pub error: Option<f64>,
     /// With --method hierarchical: leaves at most (bounds memory, about 2.3 KB a leaf); the
     /// JSON says `leaf_budget_reached` when refinement stopped there.
     #[arg(long, env = "RADCAST_MAX_LEAVES", default_value_t = HierarchySettings::default().max_leaves)]
@@ -121,18 +165,27 @@ pub enum Check {
 impl SolveArgs {
     /// The request these flags ask for, or the first flag whose value is out of range.
     pub fn request(&self) -> Result<SolveRequest, String> {
+        let fixed = self.solver.patches.is_some()
+            || self.solver.patch_size.is_some()
+            || self.hierarchy.error.is_some();
         Ok(SolveRequest {
-            target: self.target.target()?,
+            target: self.check.target(fixed)?,
             ..self.solver.request(self.hierarchy.settings()?)?
         })
+    }
+
+    /// Whether the solve is to be checked ([`CheckArgs::check`]).
+    pub fn checked(&self) -> bool {
+        self.check.check == Check::On
     }
 }
 
 impl HierarchyArgs {
     /// The hierarchy's settings, or the first flag whose value is out of range.
     pub fn settings(&self) -> Result<HierarchySettings, String> {
-        if !(self.error > 0.0 && self.error < 1.0) {
-            return Err(format!("--error must be in (0, 1), got {}", self.error));
+        let error = self.error.unwrap_or(HierarchySettings::default().error);
+        if !(error > 0.0 && error < 1.0) {
+            return Err(format!("--error must be in (0, 1), got {error}"));
         }
         if self.max_leaves == 0 {
             return Err("--max-leaves must be at least 1".into());
@@ -141,7 +194,7 @@ impl HierarchyArgs {
             return Err("--max-links must be at least 1".into());
         }
         Ok(HierarchySettings {
-            error: self.error,
+            error,
             max_leaves: self.max_leaves,
             max_links: self.max_links,
             ..HierarchySettings::default()
@@ -160,8 +213,10 @@ impl SolverArgs {
                     "--patch-size must be a positive length, got {size}"
                 ));
             }
-            None if self.patches == 0 => return Err("--patches must be at least 1".into()),
-            None => PatchTarget::Count(self.patches),
+            None => match self.patches.unwrap_or(DEFAULT_PATCHES) {
+                0 => return Err("--patches must be at least 1".into()),
+                count => PatchTarget::Count(count),
+            },
         };
         if !(self.tolerance > 0.0 && self.tolerance < 1.0) {
             return Err(format!(

@@ -161,7 +161,7 @@ fn bench(
     println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
     for &count in counts {
         let request = SolverArgs {
-            patches: count,
+            patches: Some(count),
             patch_size: None,
             method,
             ..settings.clone()
