@@ -2,6 +2,8 @@
 # Cost against scene size for one family of generated scenes: hierarchical radiosity at the
 # default settings (or at --error E), each solve measured against a path-traced reference of
 # its own scene. Prints a Markdown table (docs/BENCHMARKS.md).
+# The self-check is off, so the knob is fixed (0.03 unless --error E) and the time is the solve's.
+# RADCAST=path/to/radcast runs that build instead of this checkout's (to compare two commits).
 # Usage: scripts/hierarchy-scaling.sh room|town|corpus [--error E] SIZE|NAME...
 #   room: SIZE pieces of furniture (radcast generate --pieces); town: about SIZE triangles of
 #   soup under a sky (radcast generate --town); corpus: the real models of scripts/corpus.py
@@ -21,8 +23,10 @@ case $family in
     corpus) flag="" ;;
     *) echo "usage: $0 room|town|corpus [--error E] SIZE|NAME..." >&2; exit 2 ;;
 esac
-cargo build --quiet --release -p radcast-cli
-radcast=./target/release/radcast
+if [ -z "${RADCAST:-}" ]; then
+    cargo build --quiet --release -p radcast-cli
+fi
+radcast=${RADCAST:-./target/release/radcast}
 echo "| $family | triangles | knob used | leaves | links | links/leaf | shadow rays | refine s | solve s | total s | peak MB | smooth RMS | flat RMS | energy |"
 echo "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
 for n in "$@"; do
@@ -37,7 +41,7 @@ for n in "$@"; do
         [ -f "$reference" ] || $radcast reference "$scene" --probes 1000 --samples 16384 --out "$reference" 2>/dev/null
     fi
     # shellcheck disable=SC2086 # $knob is empty or two words.
-    $radcast solve "$scene" --method hierarchical $knob --reference "$reference" --json 2>/dev/null | python3 -c "
+    $radcast solve "$scene" --method hierarchical $knob --check off --reference "$reference" --json 2>/dev/null | python3 -c "
 import json, sys
 d = json.load(sys.stdin)
 s, e = d['seconds'], d['error']

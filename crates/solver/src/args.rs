@@ -5,11 +5,7 @@
 use crate::hierarchy::{HierarchySettings, HierarchyStats};
 use crate::mesh::PatchTarget;
 use crate::pair::{FormFactorSettings, MAX_RAYS_PER_PAIR};
-use crate::solution::request::{MethodChoice, SolveRequest, Target};
-use crate::solution::target::DEFAULT_TARGET_ERROR;
-
-/// Patches a dense solve starts from when --patches and --patch-size are not given.
-pub const DEFAULT_PATCHES: usize = 1000;
+use crate::solution::request::{DEFAULT_PATCHES, MethodChoice, SolveRequest, Target};
 use crate::solve::SolverSettings;
 
 /// Everything that decides a solution besides the scene, as flags.
@@ -79,7 +75,7 @@ impl CheckArgs {
                 return Err("--target-error needs the self-check: drop --check off".into());
             }
             (Some(TargetError::At(error)), Check::On) => Some(error),
-            (None, Check::On) if !fixed => Some(DEFAULT_TARGET_ERROR),
+            (None, Check::On) if !fixed => Some(Target::default().error),
             (Some(TargetError::Off), _) | (None, _) => None,
         };
         if let Some(error) = error.filter(|e| !(*e > 0.0 && *e < 1.0)) {
@@ -299,11 +295,19 @@ mod tests {
     #[test]
     fn defaults_ask_for_the_library_defaults_with_the_method_chosen_from_the_scene() {
         let request = parse(&[]).request().expect("defaults are valid");
+        let library =
+            SolveRequest::default().with_method(MethodChoice::Auto, HierarchySettings::default());
         assert_eq!(
             request,
-            SolveRequest::default().with_method(MethodChoice::Auto, HierarchySettings::default())
+            SolveRequest {
+                target: Some(Target::default()),
+                ..library
+            }
         );
         assert!(request.auto);
+        // Asked for as they are, the defaults fix the resolution: one solve at it.
+        let fixed = parse(&["--patches", "1000", "--error", "0.03"]).request();
+        assert_eq!(fixed, Ok(library));
     }
 
     #[test]

@@ -207,17 +207,23 @@ impl Session {
         ))
     }
 
+    /// Whether [`Session::refine_further`] can change anything: not for a dense session, one
+    /// edited since it was built, or a hierarchy a budget stopped.
+    pub fn can_refine_further(&self) -> bool {
+        let hierarchy = matches!(&self.factors, Factors::Hierarchy(h) if h.can_refine_further());
+        hierarchy && self.edited.is_empty()
+    }
+
     /// This hierarchical session refined further at the finer error `knob`, from its current
     /// solution ([`Hierarchy::refine_further`]: nothing is thrown away), with whether anything
-    /// changed: not for a dense session, one edited since it was built, or a hierarchy a budget
-    /// stopped. The next [`Session::solve`] solves on the new leaves.
+    /// changed (see [`Session::can_refine_further`]). The next [`Session::solve`] solves on
+    /// the new leaves.
     pub fn refine_further(
         self,
         knob: f64,
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<(Session, bool), NeedsEntries> {
-        let can = matches!(&self.factors, Factors::Hierarchy(h) if h.can_refine_further());
-        if !can || !self.edited.is_empty() {
+        if !self.can_refine_further() {
             return Ok((self, false));
         }
         let Session {

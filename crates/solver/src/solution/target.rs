@@ -12,10 +12,6 @@ use crate::mesh::PatchTarget;
 use crate::scene::Scene;
 use std::time::Instant;
 
-/// The smooth RMS error a solve refines to when no flag fixes its resolution: the 5% the
-/// project holds real models to (docs/BENCHMARKS.md, "Solving to a target").
-pub const DEFAULT_TARGET_ERROR: f64 = 0.05;
-
 /// The knob a hierarchical solve to a target starts at: coarse (the monastery piece is 3.4%
 /// smooth RMS at 0.5), and halved at each step down to the `--error` floor.
 pub const STARTING_KNOB: f64 = 0.4;
@@ -128,7 +124,11 @@ impl Run<'_> {
         let mut session = Session::start(scene, &mesh, &first, self.progress)?;
         loop {
             let (report, stop) = self.step(&mut session, Some(knob));
-            if let Some(why) = stop.or((knob <= finest).then_some("finest knob")) {
+            let budget = (!session.can_refine_further()).then_some("budget");
+            if let Some(why) = stop
+                .or((knob <= finest).then_some("finest knob"))
+                .or(budget)
+            {
                 self.report.stopped = why;
                 return Ok((session, report));
             }
