@@ -97,6 +97,12 @@ impl<'a> LinkFactors<'a> {
         &self.hierarchy.tree.nodes[n as usize]
     }
 
+    /// The patches of a pair of elements.
+    fn element_patches(&self, receiver: u32, source: u32) -> (&Patch, &Patch) {
+        let tree = &self.hierarchy.tree;
+        (tree.element_patch(receiver), tree.element_patch(source))
+    }
+
     /// The factor of a pair before refinement decides, with its spread over the receiver
     /// and how the shaft saw it (unoccluded where partly hidden: no rays yet); `None` when no
     /// light can pass between them.
@@ -175,10 +181,7 @@ impl<'a> LinkFactors<'a> {
         estimate: Estimate,
         rays: Rays,
     ) -> Estimate {
-        let (p, q) = (
-            self.hierarchy.tree.element_patch(receiver),
-            self.hierarchy.tree.element_patch(source),
-        );
+        let (p, q) = self.element_patches(receiver, source);
         let (factor, kernel_spread) = (estimate.factor, estimate.spread);
         // A few rays first: where they all pass, the source is taken as seen whole from the
         // whole receiver (a shadow over a tenth of the pair escapes 16 rays one time in five,
@@ -235,10 +238,7 @@ impl<'a> LinkFactors<'a> {
         level: u32,
         rays_per_point: u32,
     ) -> PartlyHidden {
-        let (p, q) = (
-            self.hierarchy.tree.element_patch(receiver),
-            self.hierarchy.tree.element_patch(source),
-        );
+        let (p, q) = self.element_patches(receiver, source);
         let seed = pair_seed(receiver as usize, source as usize);
         let (mut factor, mut point, mut cast, mut cleared, mut least, mut most) =
             (0.0, 0u32, 0u64, 0u64, 1.0f64, 0.0f64);
