@@ -836,6 +836,9 @@ async fn after_any_sequence_of_edits_over_http_the_server_serves_a_fresh_solve_o
     let (address, shared, _edit_loop) = live("scenes/cornell-box.obj", request).await;
     let mut viewer = Viewer::connect(address).await;
     viewer.wait_for(|_| true).await;
+    // Protocol 3: the light's response once, then sums.
+    let mut summing = Viewer::connect_speaking(address, 3).await;
+    summing.wait_for(|_| true).await;
     let first_lit = viewer
         .buffer
         .radiosity()
@@ -894,6 +897,18 @@ async fn after_any_sequence_of_edits_over_http_the_server_serves_a_fresh_solve_o
         viewer
             .wait_for(|b| b.info.is_some_and(|i| i.solution_version == version))
             .await;
+        let sums_before = summing.sums.len();
+        // After a move the version goes out as frames at once and as a sum once the lights'
+        // responses are solved again.
+        summing
+            .wait_for(|b| b.sum.is_some() && b.info.is_some_and(|i| i.solution_version == version))
+            .await;
+        if what == "light" {
+            // An emission edit reaches a protocol-3 viewer as one sum: 26 bytes of header and
+            // 16 a term (the Cornell box has one light).
+            assert_eq!(summing.sums[sums_before..], [42], "step {step}");
+        }
+        assert_same_light(&viewer.buffer, &summing.buffer, step);
 
         let fresh = solver::solve_scene(scene.clone(), &request, &solver::no_progress).unwrap();
         let got = viewer.buffer.radiosity();
@@ -925,6 +940,7 @@ async fn after_any_sequence_of_edits_over_http_the_server_serves_a_fresh_solve_o
         assert!(summary.is_final && summary.report.as_ref().unwrap().converged);
         assert_eq!(summary.solution_version, viewer.version());
         assert_eq!(summary.checksum, wire::checksum(&viewer.buffer.colours));
+        assert!(summing.buffer.matches(&summary), "step {step}: {summary:?}");
         let (_, objects) = get_text(address, "/api/objects").await;
         let objects: serde_json::Value = serde_json::from_str(&objects).unwrap();
         let light = index(&scene, "light") as usize;
@@ -950,6 +966,25 @@ async fn after_any_sequence_of_edits_over_http_the_server_serves_a_fresh_solve_o
         ["light", "move", "off", "turn"],
         "every kind of edit was tried"
     );
+}
+
+/// A protocol-3 viewer's sum against a protocol-2 viewer's codes of the same version: within the
+/// bound docs/PROTOCOL.md states (the sum within its responses' quantisation and one frame's
+/// bound of the served values, the codes within one frame's bound of them).
+fn assert_same_light(codes: &ColourBuffer, sum: &ColourBuffer, step: usize) {
+    let values = sum.sum.as_ref().expect("the protocol-3 viewer holds a sum");
+    let quantisation = sum
+        .responses
+        .quantisation_bound(&sum.sum_terms, values.len() as u32)
+        .unwrap();
+    for (v, (a, b)) in codes.radiosity().iter().zip(values).enumerate() {
+        let max = a.iter().copied().fold(0.0, f32::max) as f64;
+        let bound = quantisation[v] + 2.0 * wire::rgb9e5::RELATIVE_ERROR_BOUND as f64 * max * 1.01;
+        assert!(
+            a.iter().zip(b).all(|(x, y)| (x - y).abs() as f64 <= bound),
+            "step {step}, vertex {v}: codes {a:?}, sum {b:?}, bound {bound}"
+        );
+    }
 }
 
 /// An object that never emitted, set to emit: the vertices gather its direct light as a fresh

@@ -20,19 +20,34 @@ pub struct Viewer {
     pub deltas: Vec<usize>,
     /// Every geometry version announced.
     pub geometry_versions: Vec<u64>,
+    /// Protocol 3: the id of every response received.
+    pub responses: Vec<u32>,
+    /// Protocol 3: the size in bytes of every sum frame received.
+    pub sums: Vec<usize>,
 }
 
 impl Viewer {
-    /// Connects to `ws://ADDRESS/ws`.
+    /// Connects to `ws://ADDRESS/ws`, speaking protocol 2 (no subprotocol asked for).
     pub async fn connect(address: SocketAddr) -> Viewer {
-        let (socket, _) = tokio_tungstenite::connect_async(format!("ws://{address}/ws"))
-            .await
-            .unwrap();
+        Viewer::connect_speaking(address, 2).await
+    }
+
+    /// Connects to `ws://ADDRESS/ws` asking for `protocol` with its WebSocket subprotocol.
+    pub async fn connect_speaking(address: SocketAddr, protocol: u16) -> Viewer {
+        use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+        let mut request = format!("ws://{address}/ws").into_client_request().unwrap();
+        if protocol > 2 {
+            let name = wire::subprotocol(protocol).parse().unwrap();
+            request.headers_mut().insert("Sec-WebSocket-Protocol", name);
+        }
+        let (socket, _) = tokio_tungstenite::connect_async(request).await.unwrap();
         Viewer {
             socket,
             buffer: ColourBuffer::default(),
             deltas: Vec::new(),
             geometry_versions: Vec::new(),
+            responses: Vec::new(),
+            sums: Vec::new(),
         }
     }
 
@@ -49,8 +64,13 @@ impl Viewer {
                 if let ServerMessage::Delta(delta) = &message {
                     self.deltas.push(delta.indices.len());
                 }
-                if let ServerMessage::GeometryChanged { geometry_version } = message {
-                    self.geometry_versions.push(geometry_version);
+                match &message {
+                    ServerMessage::GeometryChanged { geometry_version } => {
+                        self.geometry_versions.push(*geometry_version)
+                    }
+                    ServerMessage::Response(response) => self.responses.push(response.response_id),
+                    ServerMessage::Sum(_) => self.sums.push(bytes.len()),
+                    _ => {}
                 }
                 self.buffer
                     .apply(&message)

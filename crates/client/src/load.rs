@@ -25,6 +25,8 @@ pub struct ViewerStats {
     pub resyncs: u64,
     /// Every applied frame as (send stamp, receive time), microseconds since the Unix epoch.
     pub arrivals: Vec<(u64, u64)>,
+    /// Every message as (receive time, bytes), responses and hellos included.
+    pub received: Vec<(u64, u64)>,
     /// Frame latencies, microseconds (receive time minus the frame's send stamp), for frames
     /// published after the viewer connected: the frame a viewer joins with carries the stamp
     /// of a state published earlier, which measures its age, not delivery.
@@ -33,33 +35,32 @@ pub struct ViewerStats {
 
 /// Connects with buffers sized for one viewer of many: tungstenite's 128 KiB defaults, times
 /// thousands of viewers in one process, cost more than the frames themselves.
-async fn connect(
-    url: &str,
-) -> Result<crate::session::Socket, tokio_tungstenite::tungstenite::Error> {
+async fn connect(url: &str, protocol: u16) -> anyhow::Result<crate::session::Socket> {
     let config = tokio_tungstenite::tungstenite::protocol::WebSocketConfig::default()
         .read_buffer_size(16 * 1024)
         .write_buffer_size(0);
-    Ok(
-        tokio_tungstenite::connect_async_with_config(url, Some(config), false)
-            .await?
-            .0,
-    )
+    crate::session::connect(url, protocol, Some(config)).await
 }
 
-/// One viewer: connect after `delay`, follow frames until `deadline`.
-pub async fn run_viewer(url: String, delay: Duration, deadline: Instant) -> ViewerStats {
+/// One viewer speaking `protocol`: connect after `delay`, follow frames until `deadline`.
+pub async fn run_viewer(
+    url: String,
+    protocol: u16,
+    delay: Duration,
+    deadline: Instant,
+) -> ViewerStats {
     tokio::time::sleep(delay).await; // the ramp: spreads connection attempts, not synchronisation
     let mut stats = ViewerStats::default();
     let start = Instant::now();
     let connected = tokio::time::timeout(
         deadline.saturating_duration_since(Instant::now()),
-        connect(&url),
+        connect(&url, protocol),
     )
     .await;
     let mut socket = match connected {
         Ok(Ok(socket)) => socket,
         Ok(Err(error)) => {
-            stats.failure = Some(error.to_string());
+            stats.failure = Some(format!("{error:#}"));
             return stats;
         }
         Err(_) => {
@@ -90,12 +91,13 @@ pub async fn run_viewer(url: String, delay: Duration, deadline: Instant) -> View
             Ok(Some(Ok(data))) => data,
         };
         let received = wire::unix_micros_now();
+        stats.received.push((received, data.len() as u64));
         match viewer.receive(&data) {
             Err(error) => {
                 stats.failure = Some(error.to_string());
                 break;
             }
-            Ok(Step::Hello(_) | Step::GeometryChanged { .. }) => {}
+            Ok(Step::Hello(_) | Step::GeometryChanged { .. } | Step::Response { .. }) => {}
             Ok(Step::Applied { info, .. }) => {
                 let sent_at = info.sent_at_unix_micros;
                 stats.frames += 1;
@@ -179,6 +181,9 @@ pub struct LoadReport {
     /// Per edit issued with `--edit`: milliseconds from the PUT until the last viewer applied a
     /// frame published after it (the frame carrying the edit).
     pub edit_to_last_viewer_ms: Vec<f64>,
+    /// With `--edit`: bytes each connected viewer received from the first edit on, per edit
+    /// (every message: frames, sums and the responses they need).
+    pub bytes_per_viewer_per_edit: Option<f64>,
     /// CPU this load tester used during the run, percent of one core (Linux; absent elsewhere):
     /// on one machine it competes with the server, which bounds what latency can show.
     pub load_tester_cpu_percent: Option<f64>,
@@ -264,6 +269,15 @@ pub fn summarize(
         ],
         resyncs: stats.iter().map(|s| s.resyncs).sum(),
         edit_to_last_viewer_ms: edit_latencies(&stats, edits_us),
+        bytes_per_viewer_per_edit: edits_us.first().map(|&first| {
+            let bytes: u64 = connected
+                .iter()
+                .flat_map(|s| &s.received)
+                .filter(|(at, _)| *at >= first)
+                .map(|(_, bytes)| bytes)
+                .sum();
+            bytes as f64 / (connected.len().max(1) * edits_us.len()) as f64
+        }),
         load_tester_cpu_percent,
         server,
     }

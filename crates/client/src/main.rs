@@ -25,6 +25,11 @@ use commands::{load, view, watch};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// The protocol version viewers ask for: 3 takes each light's response once and then
+    /// only emissions (docs/PROTOCOL.md); 2 takes frames only.
+    #[arg(long, global = true, default_value_t = wire::PROTOCOL_VERSION,
+          value_parser = clap::value_parser!(u16).range(2..=3))]
+    protocol: u16,
 }
 
 #[derive(Subcommand)]
@@ -40,9 +45,10 @@ enum Command {
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
-        Command::View(command) => command.run().await,
-        Command::Watch(command) => command.run().await,
-        Command::Load(command) => command.run().await,
+    let cli = Cli::parse();
+    match cli.command {
+        Command::View(command) => command.run(cli.protocol).await,
+        Command::Watch(command) => command.run(cli.protocol).await,
+        Command::Load(command) => command.run(cli.protocol).await,
     }
 }

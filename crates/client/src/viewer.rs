@@ -27,16 +27,32 @@ pub enum Step {
     },
     /// A frame was applied.
     Applied {
-        /// Whether it was a full frame (else a delta).
-        full: bool,
-        /// Patches whose code changed.
+        /// Which kind.
+        frame: Frame,
+        /// Vertices whose value changed (for a sum: the terms it adds up).
         changed: usize,
         /// What the frame says of the state now held.
         info: FrameInfo,
     },
+    /// Protocol 3: a response was kept for the sums to come.
+    Response {
+        /// Its id.
+        response_id: u32,
+    },
     /// A delta against a state this viewer does not hold: send
     /// [`wire::ClientMessage::RequestFull`] and wait.
     NeedsFull,
+}
+
+/// The kinds of frame that set the state a viewer holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Frame {
+    /// Every vertex's code.
+    Full,
+    /// The codes that changed.
+    Delta,
+    /// Protocol 3: a weighted sum of responses.
+    Sum,
 }
 
 /// A server that broke the protocol.
@@ -59,13 +75,19 @@ pub enum ProtocolError {
         /// Patches in the frame.
         got: u32,
     },
+    /// A response or a sum on a connection that did not negotiate protocol 3.
+    #[error("a protocol-3 message on a protocol-{0} connection")]
+    NotNegotiated(u16),
+    /// A sum the responses held cannot make.
+    #[error("{0}")]
+    Sum(#[from] wire::responses::SumError),
 }
 
 impl Viewer {
     /// Decodes and applies one binary message from the server.
     pub fn receive(&mut self, bytes: &[u8]) -> Result<Step, ProtocolError> {
         let message = ServerMessage::decode(bytes)?;
-        let (full, info, changed) = match (&message, self.hello) {
+        let hello = match (&message, self.hello) {
             (ServerMessage::Hello(hello), None) => {
                 self.hello = Some(*hello);
                 self.geometry_version = hello.geometry_version;
@@ -74,42 +96,78 @@ impl Viewer {
             }
             (ServerMessage::Hello(_), Some(_)) => return Err(ProtocolError::SecondHello),
             (_, None) => return Err(ProtocolError::BeforeHello),
-            (ServerMessage::GeometryChanged { geometry_version }, Some(_)) => {
+            (_, Some(hello)) => hello,
+        };
+        let (frame, info, changed) = match &message {
+            ServerMessage::Hello(_) => unreachable!("handled above"),
+            ServerMessage::GeometryChanged { geometry_version } => {
                 self.geometry_version = *geometry_version;
                 self.expected_vertices = None;
+                self.apply(&message)?;
                 return Ok(Step::GeometryChanged {
                     geometry_version: *geometry_version,
                 });
             }
-            (ServerMessage::Full(frame), Some(_)) => {
+            ServerMessage::Response(response) => {
+                self.negotiated(hello)?;
+                self.check_count(response.codes.len() as u32)?;
+                self.apply(&message)?;
+                return Ok(Step::Response {
+                    response_id: response.response_id,
+                });
+            }
+            ServerMessage::Full(frame) => {
                 let changed = if self.buffer.colours.len() == frame.colours.len() {
                     wire::changes(&self.buffer.colours, &frame.colours).0.len()
                 } else {
                     frame.colours.len()
                 };
-                (true, frame.info, changed)
+                (Frame::Full, frame.info, changed)
             }
-            (ServerMessage::Delta(frame), Some(_)) => (false, frame.info, frame.indices.len()),
+            ServerMessage::Delta(frame) => (Frame::Delta, frame.info, frame.indices.len()),
+            ServerMessage::Sum(sum) => {
+                self.negotiated(hello)?;
+                (Frame::Sum, sum.info, sum.terms.len())
+            }
         };
-        let expected = self.expected_vertices.unwrap_or(info.vertex_count);
-        if info.vertex_count != expected {
-            return Err(ProtocolError::PatchCount {
-                expected,
-                got: info.vertex_count,
-            });
-        }
+        self.check_count(info.vertex_count)?;
         match self.buffer.apply(&message) {
             Ok(()) => {}
             Err(ApplyError::BaseMismatch { .. }) => return Ok(Step::NeedsFull),
+            Err(ApplyError::Sum(error)) => return Err(error.into()),
         }
-        if full {
+        if frame != Frame::Delta {
             self.expected_vertices = Some(info.vertex_count);
         }
         Ok(Step::Applied {
-            full,
+            frame,
             changed,
             info,
         })
+    }
+
+    /// Applies a message that sets no version (a response, a geometry change).
+    fn apply(&mut self, message: &ServerMessage) -> Result<(), ProtocolError> {
+        match self.buffer.apply(message) {
+            Err(ApplyError::Sum(error)) => Err(error.into()),
+            _ => Ok(()),
+        }
+    }
+
+    /// Refuses a protocol-3 message unless the hello said 3.
+    fn negotiated(&self, hello: Hello) -> Result<(), ProtocolError> {
+        match hello.protocol_version >= 3 {
+            true => Ok(()),
+            false => Err(ProtocolError::NotNegotiated(hello.protocol_version)),
+        }
+    }
+
+    /// Refuses a vertex count other than the geometry's (unknown after a geometry change).
+    fn check_count(&self, got: u32) -> Result<(), ProtocolError> {
+        match self.expected_vertices {
+            Some(expected) if expected != got => Err(ProtocolError::PatchCount { expected, got }),
+            _ => Ok(()),
+        }
     }
 
     /// The server's hello, once received.
@@ -184,7 +242,7 @@ mod tests {
         assert!(matches!(
             step,
             Step::Applied {
-                full: true,
+                frame: Frame::Full,
                 changed: 3,
                 ..
             }
@@ -193,7 +251,7 @@ mod tests {
         assert!(matches!(
             step,
             Step::Applied {
-                full: false,
+                frame: Frame::Delta,
                 changed: 1,
                 ..
             }

@@ -51,7 +51,7 @@ pub use solution::pipeline::{Solved, solve_file, solve_mesh, solve_scene};
 pub use solution::report::{ObjectRadiosity, SolveReport, StageSeconds};
 pub use solution::report::{TargetReport, TargetStep};
 pub use solution::request::{MethodChoice, SolveError, SolveRequest, Target, starting_mesh};
-pub use solution::session::{EditError, MoveReport, MoveWork, Session};
+pub use solution::session::{EditError, MoveReport, MoveWork, Session, TermKey, VertexTerm};
 pub use solution::target::{STARTING_KNOB, session_to_target};
 pub use solve::{Method, SolveOutcome, SolverSettings, System, solve};
 pub use transport::{Entries, Transport};

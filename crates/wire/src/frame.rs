@@ -4,11 +4,23 @@
 //! little-endian fields (bincode 2 with fixed-width integers), then the payload.
 
 use crate::DecodeError;
+use crate::responses::{Response, SumFrame, Term, check_term_count, check_weight};
 use bincode::{Decode, Encode};
 use std::borrow::Cow;
 
-/// The protocol version this crate speaks; a [`Hello`] with another one is refused.
-pub const PROTOCOL_VERSION: u16 = 2;
+/// The newest protocol version this crate speaks: 3 adds per-emitter responses and their sums
+/// ([`crate::responses`]) to version 2's frames.
+pub const PROTOCOL_VERSION: u16 = 3;
+
+/// The oldest version this crate speaks: frames only. A [`Hello`] outside
+/// `PLAIN_PROTOCOL_VERSION..=PROTOCOL_VERSION` is refused.
+pub const PLAIN_PROTOCOL_VERSION: u16 = 2;
+
+/// The WebSocket subprotocol (`Sec-WebSocket-Protocol`) that asks for protocol `version`:
+/// `radcast.3`. A viewer that names none gets version 2.
+pub fn subprotocol(version: u16) -> String {
+    format!("radcast.{version}")
+}
 
 /// The most vertices a frame (or patches a geometry) may claim: bounds what a decoder allocates
 /// for hostile input.
@@ -23,6 +35,8 @@ const KIND_HELLO: u8 = 1;
 const KIND_FULL: u8 = 2;
 const KIND_DELTA: u8 = 3;
 const KIND_GEOMETRY_CHANGED: u8 = 4;
+const KIND_RESPONSE: u8 = 5;
+const KIND_SUM: u8 = 6;
 const KIND_REQUEST_FULL: u8 = 16;
 
 /// Fixed-width little-endian integers: every header has one fixed layout (docs/PROTOCOL.md).
@@ -53,7 +67,8 @@ pub struct FrameInfo {
     pub solution_version: u64,
     /// Server clock when the frame was encoded, microseconds since the Unix epoch.
     pub sent_at_unix_micros: u64,
-    /// Decoded RGB9E5 values are multiplied by this (a power of two) to give W/m^2.
+    /// Decoded RGB9E5 values are multiplied by this (a power of two) to give W/m^2; 1 for a
+    /// [`SumFrame`], whose values are W/m^2 already.
     pub scale: f32,
     /// Values in the buffer: one per geometry vertex.
     pub vertex_count: u32,
@@ -99,6 +114,10 @@ pub enum ServerMessage {
         /// The new geometry version.
         geometry_version: u64,
     },
+    /// Protocol 3: one emitter's response, to keep for sums until the geometry changes.
+    Response(Response),
+    /// Protocol 3: a version as a weighted sum of responses sent before.
+    Sum(SumFrame),
 }
 
 /// A message from a viewer.
@@ -115,6 +134,24 @@ struct FullHeader {
     scale: f32,
     vertex_count: u32,
 }
+
+#[derive(Encode, Decode)]
+struct ResponseHeader {
+    response_id: u32,
+    scale: f32,
+    vertex_count: u32,
+}
+
+#[derive(Encode, Decode)]
+struct SumHeader {
+    solution_version: u64,
+    sent_at_unix_micros: u64,
+    vertex_count: u32,
+    term_count: u32,
+}
+
+/// Bytes of one sum term: the response id and three f32 weights.
+const TERM_BYTES: usize = 16;
 
 #[derive(Encode, Decode)]
 struct DeltaHeader {
@@ -193,6 +230,36 @@ impl ServerMessage {
                 out[1] |= push_payload(&mut out, &payload);
                 out
             }
+            ServerMessage::Response(response) => {
+                let header = ResponseHeader {
+                    response_id: response.response_id,
+                    scale: response.scale,
+                    vertex_count: response.codes.len() as u32,
+                };
+                let mut out = encode_header(KIND_RESPONSE, 0, header);
+                let payload: Vec<u8> = response
+                    .codes
+                    .iter()
+                    .flat_map(|c| c.to_le_bytes())
+                    .collect();
+                out[1] |= push_payload(&mut out, &payload);
+                out
+            }
+            ServerMessage::Sum(sum) => {
+                let info = &sum.info;
+                let header = SumHeader {
+                    solution_version: info.solution_version,
+                    sent_at_unix_micros: info.sent_at_unix_micros,
+                    vertex_count: info.vertex_count,
+                    term_count: sum.terms.len() as u32,
+                };
+                let mut out = encode_header(KIND_SUM, flags_for(info), header);
+                for term in &sum.terms {
+                    out.extend(term.response_id.to_le_bytes());
+                    out.extend(term.weight.iter().flat_map(|w| w.to_le_bytes()));
+                }
+                out
+            }
         }
     }
 
@@ -204,7 +271,7 @@ impl ServerMessage {
                 check_flags(flags, 0)?;
                 let (hello, used): (Hello, usize) = decode_header(rest)?;
                 expect_end(&rest[used..])?;
-                if hello.protocol_version != PROTOCOL_VERSION {
+                if !(PLAIN_PROTOCOL_VERSION..=PROTOCOL_VERSION).contains(&hello.protocol_version) {
                     return Err(DecodeError::UnsupportedVersion {
                         got: hello.protocol_version,
                         supported: PROTOCOL_VERSION,
@@ -280,6 +347,59 @@ impl ServerMessage {
                 expect_end(&rest[used..])?;
                 Ok(ServerMessage::GeometryChanged { geometry_version })
             }
+            KIND_RESPONSE => {
+                check_flags(flags, FLAG_COMPRESSED)?;
+                let (header, used): (ResponseHeader, usize) = decode_header(rest)?;
+                check_vertex_count(header.vertex_count)?;
+                check_scale(header.scale)?;
+                let expected = header.vertex_count as usize * 4;
+                let payload = take_payload(&rest[used..], flags, expected)?;
+                if payload.len() != expected {
+                    return Err(DecodeError::Length {
+                        what: "response codes",
+                        expected,
+                        got: payload.len(),
+                    });
+                }
+                Ok(ServerMessage::Response(Response {
+                    response_id: header.response_id,
+                    scale: header.scale,
+                    codes: read_codes(&payload),
+                }))
+            }
+            KIND_SUM => {
+                check_flags(flags, FLAG_FINAL)?;
+                let (header, used): (SumHeader, usize) = decode_header(rest)?;
+                check_term_count(header.term_count, header.vertex_count)?;
+                let body = &rest[used..];
+                let expected = header.term_count as usize * TERM_BYTES;
+                if body.len() != expected {
+                    return Err(DecodeError::Length {
+                        what: "sum terms",
+                        expected,
+                        got: body.len(),
+                    });
+                }
+                let terms = body
+                    .chunks_exact(TERM_BYTES)
+                    .map(|t| {
+                        let word = |k: usize| [t[4 * k], t[4 * k + 1], t[4 * k + 2], t[4 * k + 3]];
+                        let weight = [1, 2, 3].map(|k| f32::from_le_bytes(word(k)));
+                        Ok(Term {
+                            response_id: u32::from_le_bytes(word(0)),
+                            weight: check_weight(weight)?,
+                        })
+                    })
+                    .collect::<Result<_, DecodeError>>()?;
+                let info = frame_info(
+                    header.solution_version,
+                    header.sent_at_unix_micros,
+                    1.0,
+                    header.vertex_count,
+                    flags,
+                )?;
+                Ok(ServerMessage::Sum(SumFrame { info, terms }))
+            }
             other => Err(DecodeError::UnknownKind(other)),
         }
     }
@@ -326,7 +446,7 @@ fn check_flags(flags: u8, allowed: u8) -> Result<(), DecodeError> {
     }
 }
 
-fn check_vertex_count(count: u32) -> Result<(), DecodeError> {
+pub(crate) fn check_vertex_count(count: u32) -> Result<(), DecodeError> {
     if count > MAX_VERTICES {
         Err(DecodeError::TooLarge {
             what: "vertex count",
@@ -346,13 +466,7 @@ fn frame_info(
     vertex_count: u32,
     flags: u8,
 ) -> Result<FrameInfo, DecodeError> {
-    // The largest code times the scale must stay a finite f32.
-    let max_scale = f32::MAX / crate::rgb9e5::MAX_VALUE;
-    if !(scale > 0.0 && scale <= max_scale) {
-        return Err(DecodeError::Invalid(format!(
-            "scale {scale} must be positive and at most {max_scale:e}"
-        )));
-    }
+    check_scale(scale)?;
     Ok(FrameInfo {
         solution_version,
         sent_at_unix_micros,
@@ -360,6 +474,18 @@ fn frame_info(
         vertex_count,
         is_final: flags & FLAG_FINAL != 0,
     })
+}
+
+/// A frame's or a response's scale: the largest code times it must stay a finite f32.
+fn check_scale(scale: f32) -> Result<(), DecodeError> {
+    let max_scale = f32::MAX / crate::rgb9e5::MAX_VALUE;
+    if scale > 0.0 && scale <= max_scale {
+        Ok(())
+    } else {
+        Err(DecodeError::Invalid(format!(
+            "scale {scale} must be positive and at most {max_scale:e}"
+        )))
+    }
 }
 
 /// Little-endian u32 codes (the caller has checked the length is a multiple of 4).

@@ -2,6 +2,7 @@
 //!
 //! - [`rgb9e5`]: each vertex's colour in 4 bytes (shared-exponent HDR).
 //! - [`frame`]: hello, full and delta frames, and the viewer's requests.
+//! - [`responses`]: protocol 3's per-emitter responses and the sums viewers make of them.
 //! - [`geometry`]: the scene as a viewer fetches it once.
 //! - [`ColourBuffer`]: a viewer's copy of the colours, kept current by applying frames.
 //! - [`summary`]: the JSON of `/api/solution`, typed.
@@ -11,11 +12,13 @@ pub mod display;
 pub mod frame;
 pub mod geometry;
 pub mod gltf;
+pub mod responses;
 pub mod rgb9e5;
 pub mod summary;
 
 pub use frame::{
-    ClientMessage, DeltaFrame, FrameInfo, FullFrame, Hello, PROTOCOL_VERSION, ServerMessage,
+    ClientMessage, DeltaFrame, FrameInfo, FullFrame, Hello, PLAIN_PROTOCOL_VERSION,
+    PROTOCOL_VERSION, ServerMessage, subprotocol,
 };
 pub use geometry::{Camera, Geometry};
 pub use summary::SolutionSummary;
@@ -40,11 +43,11 @@ pub enum DecodeError {
     #[error("unknown flags {0:#04x}")]
     UnknownFlags(u8),
     /// The peer speaks another protocol version.
-    #[error("protocol version {got} is not supported (this side speaks {supported})")]
+    #[error("protocol version {got} is not supported (this side speaks 2 to {supported})")]
     UnsupportedVersion {
         /// The peer's version.
         got: u16,
-        /// Ours.
+        /// Our newest.
         supported: u16,
     },
     /// A count or size exceeds what is allowed.
@@ -135,7 +138,7 @@ pub fn decode_colour(code: u32, scale: f32) -> [f32; 3] {
 /// Why a frame could not be applied to a buffer.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ApplyError {
-    /// A delta against a version this buffer does not hold: ask for a full frame.
+    /// A delta against a version this buffer does not hold as codes: ask for a full frame.
     #[error("delta from version {base} but the buffer holds {held:?}")]
     BaseMismatch {
         /// The delta's base.
@@ -143,28 +146,44 @@ pub enum ApplyError {
         /// What the buffer holds.
         held: Option<u64>,
     },
+    /// A sum the responses held cannot make (protocol 3).
+    #[error(transparent)]
+    Sum(#[from] responses::SumError),
 }
 
-/// A viewer's copy of the vertex colours.
+/// A viewer's copy of the vertex colours: codes from full and delta frames, or (protocol 3)
+/// the values of a sum of the responses it holds.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ColourBuffer {
     /// The frame info of the state held, none before the first full frame.
     pub info: Option<FrameInfo>,
-    /// One code per geometry vertex.
+    /// One code per geometry vertex, from the last full or delta frame.
     pub colours: Vec<u32>,
+    /// The responses sums are made of.
+    pub responses: responses::Responses,
+    /// The values of the last sum frame, W/m^2, while it is the state held (a full frame
+    /// replaces it).
+    pub sum: Option<Vec<[f32; 3]>>,
+    /// That sum frame's terms.
+    pub sum_terms: Vec<responses::Term>,
 }
 
 impl ColourBuffer {
-    /// Applies a frame; a hello or a geometry change changes no colour.
+    /// Applies a message; a hello changes nothing, a geometry change forgets the responses.
     pub fn apply(&mut self, message: &ServerMessage) -> Result<(), ApplyError> {
         match message {
-            ServerMessage::Hello(_) | ServerMessage::GeometryChanged { .. } => {}
+            ServerMessage::Hello(_) => {}
+            ServerMessage::GeometryChanged { .. } => self.responses.clear(),
             ServerMessage::Full(frame) => {
                 self.colours.clone_from(&frame.colours);
                 self.info = Some(frame.info);
+                self.sum = None;
             }
             ServerMessage::Delta(delta) => {
-                let held = self.info.map(|i| i.solution_version);
+                let held = self
+                    .info
+                    .filter(|_| self.sum.is_none())
+                    .map(|i| i.solution_version);
                 if held != Some(delta.base_version)
                     || self.colours.len() != delta.info.vertex_count as usize
                 {
@@ -178,17 +197,37 @@ impl ColourBuffer {
                 }
                 self.info = Some(delta.info);
             }
+            ServerMessage::Response(response) => self.responses.insert(response),
+            ServerMessage::Sum(sum) => {
+                self.sum = Some(self.responses.evaluate(sum)?);
+                self.sum_terms.clone_from(&sum.terms);
+                self.info = Some(sum.info);
+            }
         }
         Ok(())
     }
 
     /// Radiosity at every geometry vertex, W/m^2.
     pub fn radiosity(&self) -> Vec<[f32; 3]> {
+        if let Some(values) = &self.sum {
+            return values.clone();
+        }
         let scale = self.info.map_or(1.0, |info| info.scale);
         self.colours
             .iter()
             .map(|&c| decode_colour(c, scale))
             .collect()
+    }
+
+    /// Whether the state held is what `/api/solution` describes: its `checksum` of the codes,
+    /// or for a sum its `sum_checksum` of the values.
+    pub fn matches(&self, solution: &SolutionSummary) -> bool {
+        let version = self.info.map(|i| i.solution_version);
+        version == Some(solution.solution_version)
+            && match &self.sum {
+                Some(values) => solution.sum_checksum == Some(responses::sum_checksum(values)),
+                None => solution.checksum == checksum(&self.colours),
+            }
     }
 }
 

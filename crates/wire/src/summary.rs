@@ -21,6 +21,10 @@ pub struct SolutionSummary {
     pub checksum: u32,
     /// The current frame scale, W/m^2 per decoded unit (a power of two, as an f32).
     pub scale: f32,
+    /// Protocol 3, when this version is also served as a sum of responses:
+    /// [`crate::responses::sum_checksum`] of the values the sum gives (absent otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sum_checksum: Option<u32>,
     /// The solver's report once the first solve is done (`null` before).
     pub report: Option<SolveReport>,
 }

@@ -60,7 +60,49 @@ fn describe(message: &ServerMessage) -> Value {
             "kind": "geometry-changed",
             "geometry_version": geometry_version.to_string(),
         }),
+        ServerMessage::Response(r) => json!({
+            "kind": "response",
+            "response_id": r.response_id,
+            "scale": r.scale,
+            "vertex_count": r.codes.len(),
+            "codes": r.codes,
+        }),
+        ServerMessage::Sum(sum) => json!({
+            "kind": "sum",
+            "info": frame(&sum.info),
+            "terms": sum.terms.iter().map(|t| json!({
+                "response_id": t.response_id,
+                "weight": t.weight,
+            })).collect::<Vec<_>>(),
+        }),
     }
+}
+
+/// Two responses of 600 vertices and the sum of them that `sum-final` carries: what a viewer
+/// must compute from the three files, value for value and checksum.
+fn response_values(id: u32) -> Vec<[f32; 3]> {
+    (0..600)
+        .map(|i| {
+            let x = i as f32 / 600.0;
+            match id {
+                1 => [0.9 * x, 0.5 * x * x, 0.05],
+                _ => [1e-6 * (1.0 + x), 0.3 - 0.2 * x, 1.7 * (1.0 - x)],
+            }
+        })
+        .collect()
+}
+
+fn sum_terms() -> Vec<responses::Term> {
+    vec![
+        responses::Term {
+            response_id: 1,
+            weight: [17.0, 12.0, 4.0],
+        },
+        responses::Term {
+            response_id: 2,
+            weight: [0.0, 3.5, 1e-3],
+        },
+    ]
 }
 
 fn describe_geometry(g: &Geometry) -> Value {
@@ -91,10 +133,49 @@ fn vectors() -> Vec<(&'static str, Vec<u8>, Value)> {
         (
             "hello",
             ServerMessage::Hello(Hello {
+                protocol_version: PLAIN_PROTOCOL_VERSION,
+                scene_id: 0xfedc_ba98_7654_3210,
+                geometry_version: 3,
+                vertex_count: 600,
+            }),
+        ),
+        (
+            "hello-3",
+            ServerMessage::Hello(Hello {
                 protocol_version: PROTOCOL_VERSION,
                 scene_id: 0xfedc_ba98_7654_3210,
                 geometry_version: 3,
                 vertex_count: 600,
+            }),
+        ),
+        (
+            "response-lz4",
+            ServerMessage::Response(responses::Response::quantise(1, &response_values(1))),
+        ),
+        (
+            "response-raw",
+            ServerMessage::Response(responses::Response {
+                response_id: 9,
+                scale: 2.0f32.powi(-20),
+                codes: noisy.clone(),
+            }),
+        ),
+        (
+            "response-2",
+            ServerMessage::Response(responses::Response::quantise(2, &response_values(2))),
+        ),
+        (
+            "sum-final",
+            ServerMessage::Sum(responses::SumFrame {
+                info: info(9, 600, 1.0, true),
+                terms: sum_terms(),
+            }),
+        ),
+        (
+            "sum-empty",
+            ServerMessage::Sum(responses::SumFrame {
+                info: info(10, 600, 1.0, false),
+                terms: vec![],
             }),
         ),
         (
@@ -200,6 +281,26 @@ fn vectors() -> Vec<(&'static str, Vec<u8>, Value)> {
         unknown,
         describe_geometry(&textured),
     ));
+    // What a viewer holding responses 1 and 2 shows for `sum-final`: not a file of its own.
+    let mut held = responses::Responses::default();
+    for id in [1, 2] {
+        held.insert(&responses::Response::quantise(id, &response_values(id)));
+    }
+    let sum = responses::SumFrame {
+        info: info(9, 600, 1.0, true),
+        terms: sum_terms(),
+    };
+    let shown = held.evaluate(&sum).expect("both responses held");
+    out.push((
+        "evaluation",
+        vec![],
+        json!({
+            "responses": ["response-lz4", "response-2"],
+            "sum": "sum-final",
+            "values": shown,
+            "sum_checksum": responses::sum_checksum(&shown),
+        }),
+    ));
     out.push((
         "request-full",
         ClientMessage::RequestFull.encode(),
@@ -211,6 +312,27 @@ fn vectors() -> Vec<(&'static str, Vec<u8>, Value)> {
     let mut old_version = bytes("hello");
     old_version[2] = 1;
     refused.push(("refused-hello-version-1", old_version));
+    let mut new_version = bytes("hello-3");
+    new_version[2] = 4;
+    refused.push(("refused-hello-version-4", new_version));
+    let sum = bytes("sum-final");
+    refused.push(("refused-sum-truncated", sum[..sum.len() - 1].to_vec()));
+    let mut nan_weight = sum.clone();
+    let weight = sum.len() - 4; // the last term's blue weight
+    nan_weight[weight..].copy_from_slice(&f32::NAN.to_le_bytes());
+    refused.push(("refused-sum-weight-nan", nan_weight));
+    let mut negative_weight = sum.clone();
+    negative_weight[weight..].copy_from_slice(&(-1f32).to_le_bytes());
+    refused.push(("refused-sum-weight-negative", negative_weight));
+    let mut too_many = bytes("sum-empty");
+    too_many[22..26].copy_from_slice(&65u32.to_le_bytes()); // term_count past the limit
+    refused.push(("refused-sum-too-many-terms", too_many));
+    let mut final_response = bytes("response-raw");
+    final_response[1] |= 2; // a response has no final flag
+    refused.push(("refused-response-final-flag", final_response));
+    let mut response_scale = bytes("response-raw");
+    response_scale[6..10].copy_from_slice(&0f32.to_le_bytes());
+    refused.push(("refused-response-scale-zero", response_scale));
     let full = bytes("full-raw");
     refused.push(("refused-full-truncated", full[..full.len() - 1].to_vec()));
     let mut zero_scale = full.clone();
@@ -264,7 +386,7 @@ fn the_checked_in_vectors_are_what_this_crate_writes_and_reads() {
         .collect();
     if std::env::var_os("RADCAST_WRITE_VECTORS").is_some() {
         std::fs::create_dir_all(folder()).unwrap();
-        for (name, bytes, _) in &vectors {
+        for (name, bytes, _) in vectors.iter().filter(|v| v.0 != "evaluation") {
             std::fs::write(folder().join(format!("{name}.bin")), bytes).unwrap();
         }
         let text = serde_json::to_string_pretty(&Value::Object(expected.clone())).unwrap();
@@ -280,7 +402,7 @@ fn the_checked_in_vectors_are_what_this_crate_writes_and_reads() {
         Value::Object(expected),
         "expected.json is stale"
     );
-    for (name, bytes, value) in &vectors {
+    for (name, bytes, value) in vectors.iter().filter(|v| v.0 != "evaluation") {
         let file = std::fs::read(folder().join(format!("{name}.bin"))).expect(name);
         assert_eq!(&file, bytes, "{name}.bin is not what the encoder writes");
         // And the Rust decoders read the files to the same values.
@@ -302,4 +424,28 @@ fn the_checked_in_vectors_are_what_this_crate_writes_and_reads() {
             false => assert_eq!(decoded.as_ref(), Some(value), "{name}"),
         }
     }
+}
+
+#[test]
+fn the_sum_a_viewer_makes_of_the_checked_in_responses_is_the_expected_one() {
+    let expected: Value = serde_json::from_str(
+        &std::fs::read_to_string(folder().join("expected.json")).expect("expected.json"),
+    )
+    .unwrap();
+    let evaluation = &expected["evaluation"];
+    let read = |name: &Value| {
+        let file = folder().join(format!("{}.bin", name.as_str().unwrap()));
+        ServerMessage::decode(&std::fs::read(file).unwrap()).unwrap()
+    };
+    let mut buffer = ColourBuffer::default();
+    for name in evaluation["responses"].as_array().unwrap() {
+        buffer.apply(&read(name)).unwrap();
+    }
+    buffer.apply(&read(&evaluation["sum"])).unwrap();
+    let shown = buffer.radiosity();
+    assert_eq!(serde_json::to_value(&shown).unwrap(), evaluation["values"]);
+    assert_eq!(
+        Value::from(responses::sum_checksum(&shown)),
+        evaluation["sum_checksum"]
+    );
 }

@@ -43,8 +43,8 @@ pub struct LoadCommand {
 }
 
 impl LoadCommand {
-    /// Runs the command.
-    pub async fn run(self) -> anyhow::Result<()> {
+    /// Runs the command, its viewers speaking `protocol`.
+    pub async fn run(self, protocol: u16) -> anyhow::Result<()> {
         let LoadCommand {
             urls,
             clients,
@@ -91,6 +91,7 @@ impl LoadCommand {
             .map(|k| {
                 tokio::spawn(client::load::run_viewer(
                     urls[k % urls.len()].clone(),
+                    protocol,
                     ramp.mul_f64(k as f64 / clients as f64),
                     deadline,
                 ))
@@ -216,10 +217,11 @@ fn print_report(report: &LoadReport) -> anyhow::Result<()> {
         let mut sorted = e.clone();
         sorted.sort_by(f64::total_cmp);
         say!(
-            "edits     {} edits, PUT to last viewer: median {:.1} ms, max {:.1} ms",
+            "edits     {} edits, PUT to last viewer: median {:.1} ms, max {:.1} ms; {:.0} bytes per viewer per edit",
             e.len(),
             sorted[sorted.len() / 2],
-            sorted[sorted.len() - 1]
+            sorted[sorted.len() - 1],
+            report.bytes_per_viewer_per_edit.unwrap_or(0.0)
         );
     }
     if let Some(cpu) = report.load_tester_cpu_percent {

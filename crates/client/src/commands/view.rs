@@ -41,8 +41,8 @@ pub struct ViewCommand {
 }
 
 impl ViewCommand {
-    /// Runs the command.
-    pub async fn run(self) -> anyhow::Result<()> {
+    /// Runs the command, its viewers speaking `protocol`.
+    pub async fn run(self, protocol: u16) -> anyhow::Result<()> {
         let ViewCommand {
             urls,
             out,
@@ -65,7 +65,9 @@ impl ViewCommand {
         let viewers: Vec<_> = (0..clients)
             .map(|k| {
                 let urls = urls.clone();
-                tokio::spawn(async move { watch_until_final_on_any(&urls, k, limit).await })
+                tokio::spawn(
+                    async move { watch_until_final_on_any(&urls, k, protocol, limit).await },
+                )
             })
             .collect();
         let mut outcomes: Vec<ViewerOutcome> = Vec::with_capacity(clients);
@@ -76,7 +78,6 @@ impl ViewCommand {
             let base = base.clone();
             tokio::task::spawn_blocking(move || fetch_solution(&base)).await??
         };
-        let expected = solution.checksum;
         let cameras = if cameras.is_empty() {
             vec![View::for_scene(&model.geometry)]
         } else {
@@ -84,23 +85,23 @@ impl ViewCommand {
         };
         let mut mismatched = 0;
         for (v, outcome) in outcomes.iter().enumerate() {
-            if outcome.buffer.colours.len() != model.geometry.positions.len() {
+            let values = outcome.buffer.radiosity().len();
+            if values != model.geometry.positions.len() {
                 bail!(
-                    "viewer {v}: {} colours, but the geometry has {} vertices",
-                    outcome.buffer.colours.len(),
+                    "viewer {v}: {values} colours, but the geometry has {} vertices",
                     model.geometry.positions.len()
                 );
             }
-            let checksum = wire::checksum(&outcome.buffer.colours);
             let version = outcome.buffer.info.map_or(0, |i| i.solution_version);
-            let status = if checksum == expected {
-                "ok"
-            } else {
-                "MISMATCH"
+            let (held, checksum) = match &outcome.buffer.sum {
+                Some(values) => ("sum", wire::responses::sum_checksum(values)),
+                None => ("codes", wire::checksum(&outcome.buffer.colours)),
             };
-            mismatched += usize::from(checksum != expected);
+            let matches = outcome.buffer.matches(&solution);
+            let status = if matches { "ok" } else { "MISMATCH" };
+            mismatched += usize::from(!matches);
             say!(
-                "viewer {v}: version {version}, {} frames, {} bytes, first frame after {:.1} ms, checksum {checksum:08x} {status}",
+                "viewer {v}: version {version} as {held}, {} frames, {} bytes, first frame after {:.1} ms, checksum {checksum:08x} {status}",
                 outcome.frames,
                 outcome.bytes,
                 outcome.first_frame.as_secs_f64() * 1e3
@@ -113,7 +114,10 @@ impl ViewCommand {
         }
         if mismatched > 0 {
             bail!(
-                "{mismatched} of {clients} viewers do not match the server's checksum {expected:08x}"
+                "{mismatched} of {clients} viewers do not match the server's version {} (checksum {:08x}, sum checksum {:?})",
+                solution.solution_version,
+                solution.checksum,
+                solution.sum_checksum
             );
         }
         Ok(())

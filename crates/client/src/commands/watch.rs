@@ -4,7 +4,7 @@
 use anyhow::Context;
 use client::render::{Model, View, render};
 use client::session::{next_binary, request_full};
-use client::viewer::{Step, Viewer};
+use client::viewer::{Frame, Step, Viewer};
 use client::{fetch_scene, http_base};
 use std::path::PathBuf;
 
@@ -28,8 +28,8 @@ pub struct WatchCommand {
 }
 
 impl WatchCommand {
-    /// Runs the command.
-    pub async fn run(self) -> anyhow::Result<()> {
+    /// Runs the command, speaking `protocol`.
+    pub async fn run(self, protocol: u16) -> anyhow::Result<()> {
         let WatchCommand {
             urls,
             out_dir,
@@ -51,8 +51,8 @@ impl WatchCommand {
         };
         let mut failed_in_a_row = 0;
         for url in urls.iter().cycle() {
-            let ended = match tokio_tungstenite::connect_async(url.as_str()).await {
-                Ok((socket, _)) => {
+            let ended = match client::session::connect(url, protocol, None).await {
+                Ok(socket) => {
                     failed_in_a_row = 0;
                     match watcher.follow(url, socket).await? {
                         Followed::Enough => return Ok(()),
@@ -61,7 +61,7 @@ impl WatchCommand {
                 }
                 Err(error) => {
                     failed_in_a_row += 1;
-                    Err(anyhow::Error::new(error).context(format!("connecting to {url}")))
+                    Err(error)
                 }
             };
             // One server: its end is the end. Several: go on with the next, until every one
@@ -119,7 +119,7 @@ impl Watcher {
                 Some(Err(error)) => return Ok(Followed::Ended(Err(error))),
                 None => return Ok(Followed::Ended(Ok(()))),
             };
-            let (full, changed, info) = match viewer.receive(&data)? {
+            let (frame, changed, info) = match viewer.receive(&data)? {
                 Step::Hello(hello) => {
                     say!(
                         "hello: scene {:016x}, {} vertices, protocol {}, from {url}",
@@ -140,18 +140,26 @@ impl Watcher {
                     request_full(&mut socket).await?;
                     continue;
                 }
+                Step::Response { response_id } => {
+                    say!("response {response_id}: {} bytes", data.len());
+                    continue;
+                }
                 Step::Applied {
-                    full,
+                    frame,
                     changed,
                     info,
-                } => (full, changed, info),
+                } => (frame, changed, info),
             };
             let latency_ms =
                 wire::unix_micros_now().saturating_sub(info.sent_at_unix_micros) as f64 / 1e3;
+            let what = match frame {
+                Frame::Full => format!("full, {changed} vertices changed"),
+                Frame::Delta => format!("delta, {changed} vertices changed"),
+                Frame::Sum => format!("sum of {changed} responses"),
+            };
             say!(
-                "version {}: {}, {changed} vertices changed, {} bytes, latency {latency_ms:.1} ms{}",
+                "version {}: {what}, {} bytes, latency {latency_ms:.1} ms{}",
                 info.solution_version,
-                if full { "full" } else { "delta" },
                 data.len(),
                 if info.is_final { ", final" } else { "" }
             );

@@ -9,17 +9,33 @@ use wire::{FrameInfo, FullFrame, Hello, ServerMessage};
 pub type Socket = tokio_tungstenite::WebSocketStream<tokio::net::TcpStream>;
 
 /// Accepts one viewer on an ephemeral port and hands its socket to `serve`; returns the port's
-/// address at once.
+/// address at once. It is a protocol-2 server, as servers were before subprotocols: it answers
+/// a viewer that asks for `radcast.3` without one (which such a viewer must refuse, then
+/// connect again asking for none) and serves the first that asks for none.
 pub async fn serve_one<F, Fut>(serve: F) -> std::net::SocketAddr
 where
     F: FnOnce(Socket) -> Fut + Send + 'static,
     Fut: Future<Output = ()> + Send,
 {
+    use tokio_tungstenite::tungstenite::handshake::server::{Request, Response};
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let address = listener.local_addr().unwrap();
     tokio::spawn(async move {
-        let (stream, _) = listener.accept().await.unwrap();
-        serve(tokio_tungstenite::accept_async(stream).await.unwrap()).await;
+        loop {
+            let (stream, _) = listener.accept().await.unwrap();
+            let mut asked = false;
+            let note = |request: &Request, response: Response| {
+                asked = request.headers().contains_key("Sec-WebSocket-Protocol");
+                Ok(response)
+            };
+            let Ok(socket) = tokio_tungstenite::accept_hdr_async(stream, note).await else {
+                continue;
+            };
+            if !asked {
+                serve(socket).await;
+                return;
+            }
+        }
     });
     address
 }
@@ -27,7 +43,7 @@ where
 /// Sends the hello of a one-vertex scene; false when the viewer is gone.
 pub async fn send_hello(socket: &mut Socket) -> bool {
     let hello = Hello {
-        protocol_version: wire::PROTOCOL_VERSION,
+        protocol_version: wire::PLAIN_PROTOCOL_VERSION,
         scene_id: 1,
         geometry_version: 1,
         vertex_count: 1,

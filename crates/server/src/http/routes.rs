@@ -120,6 +120,7 @@ pub fn solution_summary(shared: &Shared) -> SolutionSummary {
         is_final: current.is_final,
         checksum: current.checksum,
         scale: current.scale,
+        sum_checksum: current.sum.as_ref().map(|sum| sum.checksum),
         report: shared.report.lock().ok().and_then(|r| r.clone()),
     }
 }
@@ -163,6 +164,31 @@ pub fn is_websocket_key(key: &[u8]) -> bool {
         && &key[22..] == b"=="
 }
 
+/// The protocol version a viewer asked for with `Sec-WebSocket-Protocol` (RFC 6455, 4.1): the
+/// newest `radcast.N` it offers that this server speaks, or version 2 when it offers none at
+/// all; a refusal naming what it offered when none of them is spoken here.
+fn negotiate(offered: Option<&axum::http::HeaderValue>) -> Result<u16, String> {
+    let Some(offered) = offered else {
+        return Ok(wire::PLAIN_PROTOCOL_VERSION);
+    };
+    let text = offered.to_str().unwrap_or("");
+    text.split(',')
+        .map(str::trim)
+        .filter_map(|name| name.strip_prefix("radcast.")?.parse::<u16>().ok())
+        .filter(|v| (wire::PLAIN_PROTOCOL_VERSION..=wire::PROTOCOL_VERSION).contains(v))
+        .max()
+        .ok_or_else(|| {
+            let spoken: Vec<String> = (wire::PLAIN_PROTOCOL_VERSION..=wire::PROTOCOL_VERSION)
+                .map(wire::subprotocol)
+                .collect();
+            format!(
+                "radcast-server: none of the WebSocket subprotocols offered ({}) is spoken here: {} (or offer none for radcast.2)\n",
+                text.escape_debug(),
+                spoken.join(", ")
+            )
+        })
+}
+
 async fn websocket(
     State(shared): State<Arc<Shared>>,
     ConnectInfo(peer): ConnectInfo<SocketAddr>,
@@ -177,6 +203,10 @@ async fn websocket(
         )
             .into_response();
     }
+    let protocol = match negotiate(headers.get(header::SEC_WEBSOCKET_PROTOCOL)) {
+        Ok(protocol) => protocol,
+        Err(refusal) => return (StatusCode::BAD_REQUEST, refusal).into_response(),
+    };
     let place = match shared.process.viewers.admit(peer.ip()) {
         Ok(place) => place,
         Err(Refusal::ServerFull) => {
@@ -197,6 +227,10 @@ async fn websocket(
     let limits = shared.process.limits;
     // Viewers send only tiny control messages and every frame is flushed as it is sent, so
     // small buffers do: tungstenite's 128 KiB defaults made each idle viewer cost 144 KB.
+    let upgrade = match protocol {
+        wire::PLAIN_PROTOCOL_VERSION => upgrade,
+        newer => upgrade.protocols([wire::subprotocol(newer)]),
+    };
     upgrade
         .read_buffer_size(4096)
         .write_buffer_size(0)
@@ -206,7 +240,7 @@ async fn websocket(
             shared
                 .process
                 .tasks
-                .track_future(serve_viewer(socket, shared.clone(), place))
+                .track_future(serve_viewer(socket, shared.clone(), place, protocol))
         })
 }
 
@@ -255,7 +289,23 @@ pub async fn serve(listener: TcpListener, shared: Arc<Shared>) -> std::io::Resul
 
 #[cfg(test)]
 mod tests {
-    use super::is_websocket_key;
+    use super::{is_websocket_key, negotiate};
+    use axum::http::HeaderValue;
+
+    #[test]
+    fn a_viewer_gets_the_newest_protocol_it_offers_and_version_two_when_it_offers_none() {
+        let offer = |text: &'static str| negotiate(Some(&HeaderValue::from_static(text)));
+        assert_eq!(negotiate(None), Ok(2));
+        assert_eq!(offer("radcast.3"), Ok(3));
+        assert_eq!(offer("radcast.2, radcast.3"), Ok(3));
+        assert_eq!(offer("chat, radcast.2"), Ok(2));
+        assert_eq!(offer("radcast.9,radcast.3"), Ok(3));
+        let refused = offer("radcast.4, chat").unwrap_err();
+        assert!(
+            refused.contains("(radcast.4, chat)") && refused.contains("radcast.2, radcast.3"),
+            "{refused}"
+        );
+    }
 
     #[test]
     fn a_websocket_key_is_sixteen_bytes_in_base64() {

@@ -4,11 +4,12 @@
 use crate::Shared;
 use crate::http::admission::Pass;
 use crate::http::metrics::DropReason;
-use crate::publish::hub::Published;
+use crate::publish::hub::{HeldResponse, Published};
 use axum::extract::ws::{CloseFrame, Message, WebSocket, close_code};
 use bytes::Bytes;
 use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
+use std::collections::HashSet;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use tokio::sync::watch;
@@ -37,8 +38,9 @@ enum End {
     Shutdown,
 }
 
-/// Runs one admitted viewer to the end; `_place` holds its place under the viewer caps.
-pub async fn serve_viewer(socket: WebSocket, shared: Arc<Shared>, _place: Pass) {
+/// Runs one admitted viewer speaking `protocol` (2 or 3) to the end; `_place` holds its place
+/// under the viewer caps.
+pub async fn serve_viewer(socket: WebSocket, shared: Arc<Shared>, _place: Pass, protocol: u16) {
     let (sink, stream) = socket.split();
     let updates = shared.hub.subscribe();
     let mut viewer = Viewer {
@@ -46,7 +48,10 @@ pub async fn serve_viewer(socket: WebSocket, shared: Arc<Shared>, _place: Pass) 
         sink,
         stream,
         updates,
+        protocol,
         held: 0,
+        held_sum: false,
+        held_responses: HashSet::new(),
         held_geometry: 0,
         last_heard: Instant::now(),
     };
@@ -60,8 +65,14 @@ struct Viewer<'a> {
     sink: SplitSink<WebSocket, Message>,
     stream: SplitStream<WebSocket>,
     updates: watch::Receiver<Arc<Published>>,
+    /// The protocol version it speaks: 3 takes sums of responses.
+    protocol: u16,
     /// The solution version the viewer holds (a delta's base must be this).
     held: u64,
+    /// Whether it holds that version as a sum (then a delta cannot apply to it).
+    held_sum: bool,
+    /// The responses it was sent for the geometry it holds.
+    held_responses: HashSet<u32>,
     /// The geometry version the viewer holds.
     held_geometry: u64,
     last_heard: Instant,
@@ -72,18 +83,20 @@ impl Viewer<'_> {
     /// the session ends (never `Ok`).
     async fn run(&mut self) -> Result<std::convert::Infallible, End> {
         let limits = self.shared.process.limits;
-        let first = self.updates.borrow_and_update().clone();
         let geometry = self.shared.hub.geometry();
         self.held_geometry = geometry.version;
-        self.held = first.version;
-        self.send(Message::Binary(geometry.hello.clone())).await?;
-        self.send(Message::Binary(first.full.clone())).await?;
+        self.send(Message::Binary(geometry.hello(self.protocol)))
+            .await?;
+        self.catch_up().await?;
         let mut ping = interval(limits.ping_interval);
         ping.tick().await;
         loop {
             let outgoing = tokio::select! {
                 changed = self.updates.changed() => match changed {
-                    Ok(()) => self.newest_frame().await?,
+                    Ok(()) => {
+                        self.catch_up().await?;
+                        continue;
+                    }
                     Err(_) => return Err(End::Shutdown),
                 },
                 incoming = self.stream.next() => match self.answer(incoming)? {
@@ -115,33 +128,77 @@ impl Viewer<'_> {
         }
     }
 
-    /// The frame that brings the viewer to the newest version: a delta from the version it
-    /// holds, or the full frame. A new geometry is announced first, so the viewer refetches it
-    /// before the colours that go with it.
-    async fn newest_frame(&mut self) -> Result<Message, End> {
+    /// Brings the viewer to the newest version: its responses (those not sent yet) and its sum
+    /// for a protocol-3 viewer when the version has one, else a delta from the version it
+    /// holds, or the full frame; nothing when it holds the newest already. A new geometry is
+    /// announced first, so the viewer refetches it before the colours that go with it.
+    async fn catch_up(&mut self) -> Result<(), End> {
         let newest = self.updates.borrow_and_update().clone();
-        if newest.geometry_version != self.held_geometry {
+        if newest.geometry_version != self.held_geometry && self.held != 0 {
             self.held_geometry = newest.geometry_version;
+            self.held_responses.clear();
             let notice = ServerMessage::GeometryChanged {
                 geometry_version: self.held_geometry,
             };
             self.send(Message::Binary(Bytes::from(notice.encode())))
                 .await?;
         }
-        let metrics = &self.shared.metrics;
-        let bytes = match &newest.delta {
-            Some((base, delta)) if *base == self.held => delta.clone(),
-            _ => {
-                let skipped = newest.version.saturating_sub(self.held + 1);
-                metrics
-                    .versions_skipped
-                    .fetch_add(skipped, Ordering::Relaxed);
-                metrics.full_resyncs.fetch_add(1, Ordering::Relaxed);
-                newest.full.clone()
+        if let Some(sum) = newest.sum.as_ref().filter(|_| self.protocol >= 3) {
+            if self.held == newest.version && self.held_sum {
+                return Ok(());
             }
+            if let Some(responses) = self.responses_to_send(&sum.response_ids) {
+                for response in responses {
+                    self.send(Message::Binary(response.message.clone())).await?;
+                    self.held_responses.insert(response.response.response_id);
+                }
+                self.send(Message::Binary(sum.frame.clone())).await?;
+                self.hold(&newest, true);
+                return Ok(());
+            }
+            // A response already replaced by a newer set: this version travels as frames.
+        }
+        if self.held == newest.version && !self.held_sum {
+            return Ok(());
+        }
+        let bytes = match &newest.delta {
+            Some((base, delta)) if *base == self.held && !self.held_sum => delta.clone(),
+            _ => newest.full.clone(),
         };
-        self.held = newest.version;
-        Ok(Message::Binary(bytes))
+        self.send(Message::Binary(bytes)).await?;
+        self.hold(&newest, false);
+        Ok(())
+    }
+
+    /// The responses of `ids` this viewer lacks, or `None` if the hub no longer has one.
+    fn responses_to_send(&self, ids: &[u32]) -> Option<Vec<Arc<HeldResponse>>> {
+        ids.iter()
+            .filter(|id| !self.held_responses.contains(id))
+            .map(|id| self.shared.hub.response(*id))
+            .collect()
+    }
+
+    /// Records that the viewer now holds `published` (as its sum or as codes), counting the
+    /// versions it skipped and the full frames it took.
+    fn hold(&mut self, published: &Published, as_sum: bool) {
+        let metrics = &self.shared.metrics;
+        let skipped = published.version.saturating_sub(self.held + 1);
+        if self.held != 0 && skipped > 0 {
+            metrics
+                .versions_skipped
+                .fetch_add(skipped, Ordering::Relaxed);
+        }
+        let was_delta = !as_sum
+            && !self.held_sum
+            && published
+                .delta
+                .as_ref()
+                .is_some_and(|(base, _)| *base == self.held);
+        if !as_sum && !was_delta && self.held != 0 {
+            metrics.full_resyncs.fetch_add(1, Ordering::Relaxed);
+        }
+        self.held = published.version;
+        self.held_sum = as_sum;
     }
 
     /// What to send for what the viewer sent (`None`: nothing), or why the session ends.
@@ -155,7 +212,7 @@ impl Viewer<'_> {
             Some(Ok(Message::Binary(bytes))) => match ClientMessage::decode(&bytes) {
                 Ok(ClientMessage::RequestFull) => {
                     let newest = self.updates.borrow_and_update().clone();
-                    self.held = newest.version;
+                    (self.held, self.held_sum) = (newest.version, false);
                     let metrics = &self.shared.metrics;
                     metrics.full_resyncs.fetch_add(1, Ordering::Relaxed);
                     Ok(Some(Message::Binary(newest.full.clone())))

@@ -6,7 +6,11 @@
 use bytes::Bytes;
 use std::sync::Arc;
 use tokio::sync::watch;
-use wire::{DeltaFrame, FrameInfo, FullFrame, Geometry, Hello, PROTOCOL_VERSION, ServerMessage};
+use wire::responses::{Response, SumFrame, Term};
+use wire::{
+    DeltaFrame, FrameInfo, FullFrame, Geometry, Hello, PLAIN_PROTOCOL_VERSION, PROTOCOL_VERSION,
+    ServerMessage,
+};
 
 /// One version of the solution, with its frames already encoded.
 #[derive(Debug)]
@@ -27,6 +31,21 @@ pub struct Published {
     pub checksum: u32,
     /// The geometry version these colours belong to.
     pub geometry_version: u64,
+    /// The same version as a sum of responses, for protocol-3 viewers, when the server has one
+    /// within the stated bound.
+    pub sum: Option<Arc<SumForm>>,
+}
+
+/// A version as a sum of the hub's responses: what protocol-3 viewers are sent instead of its
+/// frames.
+#[derive(Debug)]
+pub struct SumForm {
+    /// The responses it names, each sent to a viewer once.
+    pub response_ids: Vec<u32>,
+    /// The encoded [`SumFrame`].
+    pub frame: Bytes,
+    /// [`wire::responses::sum_checksum`] of the values it gives.
+    pub checksum: u32,
 }
 
 impl Published {
@@ -55,6 +74,18 @@ impl Published {
             full,
             delta,
             geometry_version,
+            sum: None,
+        }
+    }
+
+    /// The same version with `sum` (a response set it can now be made from).
+    fn with_sum(&self, sum: Arc<SumForm>) -> Published {
+        Published {
+            colours: self.colours.clone(),
+            full: self.full.clone(),
+            delta: self.delta.clone(),
+            sum: Some(sum),
+            ..*self
         }
     }
 }
@@ -66,8 +97,8 @@ pub struct GeometryState {
     pub version: u64,
     /// The scene id the hello carries.
     pub scene_id: u64,
-    /// The encoded hello every viewer gets first.
-    pub hello: Bytes,
+    /// The encoded hello every viewer gets first: protocol 2's and 3's.
+    hellos: [Bytes; 2],
     /// The encoded geometry served at `/api/scene`.
     pub encoded: Bytes,
     /// The same geometry, for exports.
@@ -86,16 +117,19 @@ impl GeometryState {
         geometry: Geometry,
         textures: Arc<[Bytes]>,
     ) -> GeometryState {
-        let hello = Hello {
-            protocol_version: PROTOCOL_VERSION,
-            scene_id,
-            geometry_version: version,
-            vertex_count: geometry.positions.len() as u32,
+        let hello = |protocol_version| {
+            let hello = Hello {
+                protocol_version,
+                scene_id,
+                geometry_version: version,
+                vertex_count: geometry.positions.len() as u32,
+            };
+            Bytes::from(ServerMessage::Hello(hello).encode())
         };
         GeometryState {
             version,
             scene_id,
-            hello: ServerMessage::Hello(hello).encode().into(),
+            hellos: [hello(PLAIN_PROTOCOL_VERSION), hello(PROTOCOL_VERSION)],
             encoded: geometry.encode().into(),
             model: Arc::new(geometry),
             textures,
@@ -103,10 +137,28 @@ impl GeometryState {
     }
 }
 
+impl GeometryState {
+    /// The hello for a viewer speaking `protocol` (2 or 3).
+    pub fn hello(&self, protocol: u16) -> Bytes {
+        self.hellos[usize::from(protocol >= PROTOCOL_VERSION)].clone()
+    }
+}
+
+/// A response as the hub holds it: its values as viewers decode them, and its message.
+#[derive(Debug)]
+pub struct HeldResponse {
+    /// What a viewer holds once it has the message.
+    pub response: Response,
+    /// The encoded [`ServerMessage::Response`].
+    pub message: Bytes,
+}
+
 /// Publishes solution versions and hands them to viewers.
 pub struct Hub {
     sender: watch::Sender<Arc<Published>>,
     geometry: std::sync::RwLock<Arc<GeometryState>>,
+    /// The responses sums are made of, for the current geometry, by id.
+    responses: std::sync::RwLock<std::collections::BTreeMap<u32, Arc<HeldResponse>>>,
     /// Identifies scene content and solve settings.
     pub scene_id: u64,
 }
@@ -158,6 +210,7 @@ impl Hub {
                 geometry.clone(),
                 textures,
             ))),
+            responses: Default::default(),
             scene_id,
         }
     }
@@ -217,6 +270,18 @@ impl Hub {
     /// Publishes a new state (radiosity in W/m^2) unless it encodes to what viewers already
     /// have; returns the version viewers will hold.
     pub fn publish(&self, radiosity: &[[f32; 3]], is_final: bool) -> u64 {
+        self.publish_with_sum(radiosity, is_final, None)
+    }
+
+    /// Like [`Hub::publish`], and for protocol-3 viewers the same state as the sum of
+    /// `terms` (responses given to [`Hub::add_response`]) when that sum is within the bound
+    /// [`sum_within_bound`] states of `radiosity`.
+    pub fn publish_with_sum(
+        &self,
+        radiosity: &[[f32; 3]],
+        is_final: bool,
+        terms: Option<Vec<Term>>,
+    ) -> u64 {
         let previous = self.current();
         let geometry_version = self.geometry().version;
         let (scale, colours) = encode(radiosity, Some(previous.scale));
@@ -225,19 +290,105 @@ impl Hub {
             && previous.is_final == is_final
             && previous.geometry_version == geometry_version
         {
+            if let Some(terms) = terms {
+                self.attach_sum(radiosity, terms);
+            }
             return previous.version;
         }
-        let next = Self::frames(
-            previous.version + 1,
+        let version = previous.version + 1;
+        let mut next = Self::frames(
+            version,
             is_final,
             scale,
             colours,
             Some(&previous),
             geometry_version,
         );
-        let version = next.version;
+        next.sum = terms.and_then(|terms| self.sum_form(version, is_final, radiosity, terms));
         self.sender.send_replace(Arc::new(next));
         version
+    }
+
+    /// Gives the version viewers hold, whose values are `radiosity` (to the solver's
+    /// tolerance: the same solution, summed from its lights' responses), the sum of `terms`
+    /// as well, unless it has one: protocol-3 viewers then fetch the responses before the next
+    /// edit, and the version stays the same for everyone.
+    pub fn attach_sum(&self, radiosity: &[[f32; 3]], terms: Vec<Term>) {
+        let current = self.current();
+        if current.sum.is_some() || current.colours.len() != radiosity.len() {
+            return;
+        }
+        if let Some(sum) = self.sum_form(current.version, current.is_final, radiosity, terms) {
+            self.sender.send_replace(Arc::new(current.with_sum(sum)));
+        }
+    }
+
+    /// Version `version` as the sum of `terms`, if the hub holds their responses and the sum
+    /// gives every vertex of `radiosity` within the bound.
+    fn sum_form(
+        &self,
+        version: u64,
+        is_final: bool,
+        radiosity: &[[f32; 3]],
+        terms: Vec<Term>,
+    ) -> Option<Arc<SumForm>> {
+        let held = self.responses.read().expect("responses lock");
+        let responses: Vec<&HeldResponse> = terms
+            .iter()
+            .map(|t| held.get(&t.response_id).map(|r| r.as_ref()))
+            .collect::<Option<_>>()?;
+        let frame = SumFrame {
+            info: FrameInfo {
+                solution_version: version,
+                sent_at_unix_micros: wire::unix_micros_now(),
+                scale: 1.0,
+                vertex_count: radiosity.len() as u32,
+                is_final,
+            },
+            terms,
+        };
+        let mut viewers = wire::responses::Responses::default();
+        responses.iter().for_each(|r| viewers.insert(&r.response));
+        let shown = viewers.evaluate(&frame).ok()?;
+        let bound = viewers
+            .quantisation_bound(&frame.terms, frame.info.vertex_count)
+            .ok()?;
+        if !sum_within_bound(radiosity, &shown, &bound) {
+            tracing::info!(
+                version,
+                "the sum of responses is past its bound: frames only"
+            );
+            return None;
+        }
+        Some(Arc::new(SumForm {
+            response_ids: frame.terms.iter().map(|t| t.response_id).collect(),
+            checksum: wire::responses::sum_checksum(&shown),
+            frame: Bytes::from(ServerMessage::Sum(frame).encode()),
+        }))
+    }
+
+    /// Holds `response` for sums from now on (its id new to this hub).
+    pub fn add_response(&self, response: Response) {
+        let message = Bytes::from(ServerMessage::Response(response.clone()).encode());
+        let held = Arc::new(HeldResponse { response, message });
+        self.responses
+            .write()
+            .expect("responses lock")
+            .insert(held.response.response_id, held);
+    }
+
+    /// Forgets every response (they belong to a geometry or a gather that is gone).
+    pub fn clear_responses(&self) {
+        self.responses.write().expect("responses lock").clear();
+    }
+
+    /// Response `id`, if the hub holds it.
+    pub fn response(&self, id: u32) -> Option<Arc<HeldResponse>> {
+        self.responses
+            .read()
+            .expect("responses lock")
+            .get(&id)
+            .cloned()
     }
 
     /// A hub that serves what another hub published (an edge's copy of an origin's): the
@@ -247,6 +398,7 @@ impl Hub {
             scene_id: geometry.scene_id,
             sender: watch::Sender::new(Arc::new(state)),
             geometry: std::sync::RwLock::new(Arc::new(geometry)),
+            responses: Default::default(),
         }
     }
 
@@ -269,6 +421,26 @@ impl Hub {
     pub fn subscribe(&self) -> watch::Receiver<Arc<Published>> {
         self.sender.subscribe()
     }
+}
+
+/// Whether `shown`, the sum of responses as viewers evaluate it, is within the bound
+/// docs/PROTOCOL.md states of the served `radiosity` at every vertex: the responses'
+/// `quantisation` ([`wire::responses::Responses::quantisation_bound`]) plus one full frame's
+/// bound, which covers the f32 rounding of both and a version whose codes came from the base
+/// solve (the same solution to the solver's tolerance).
+fn sum_within_bound(radiosity: &[[f32; 3]], shown: &[[f32; 3]], quantisation: &[f64]) -> bool {
+    radiosity
+        .iter()
+        .zip(shown)
+        .enumerate()
+        .all(|(v, (exact, sum))| {
+            let brightest = exact.iter().copied().fold(0.0f32, f32::max) as f64;
+            let bound = quantisation[v] + wire::rgb9e5::RELATIVE_ERROR_BOUND as f64 * brightest;
+            exact
+                .iter()
+                .zip(sum)
+                .all(|(e, s)| (*e as f64 - *s as f64).abs() <= bound)
+        })
 }
 
 #[cfg(test)]

@@ -5,7 +5,7 @@
 use super::cache::{self, CachedSolution, Rejected};
 use super::prepare::Prepared;
 use super::to_wire::{
-    emission_only, estimate_for_viewers, geometry_of, report_for_viewers, to_f32,
+    ResponseIds, emission_only, estimate_for_viewers, geometry_of, report_for_viewers, to_f32,
 };
 use crate::Shared;
 use crate::health::Fault;
@@ -257,7 +257,8 @@ fn publish_cached(prepared: &Prepared, shared: &Shared, dir: &Path) -> Option<Ve
 /// Applies edits as they come until shutdown: each batch re-solves from the current answer
 /// (form factors unchanged) and publishes one new version. Blocking.
 pub fn serve_edits(prepared: &Prepared, shared: &Shared, base: EditBase) -> anyhow::Result<()> {
-    let mut session = match base {
+    let mut ids = ResponseIds::default();
+    let session = match base {
         EditBase::Live(session) => *session,
         EditBase::Cached(radiosity) => {
             // Form factors are computed on the first edit only: a cached scene nobody edits
@@ -282,15 +283,35 @@ pub fn serve_edits(prepared: &Prepared, shared: &Shared, base: EditBase) -> anyh
                 shared.hub.replace_geometry(fresh);
                 session.solve(&solver::no_progress);
             }
-            apply(&mut session, shared, batch, prepared.check)?;
+            apply(&mut session, shared, batch, prepared.check, &mut ids)?;
             session
         }
     };
-    // The lights' responses, so that the first edit of a light is as fast as the rest.
+    edit_on(session, shared, prepared.check, ids)
+}
+
+/// Prepares the lights' responses (so that the first edit of a light is as fast as the rest,
+/// and protocol-3 viewers can fetch them before it), then applies edits until shutdown.
+fn edit_on(
+    mut session: Session,
+    shared: &Shared,
+    check_moves: bool,
+    mut ids: ResponseIds,
+) -> anyhow::Result<()> {
     let iterations = session.prepare_emitters();
+    offer_sum(&session, shared, &mut ids)?;
     tracing::info!(iterations, "emitter responses ready");
     while let Some(batch) = shared.edits.wait() {
-        apply(&mut session, shared, batch, prepared.check)?;
+        apply(&mut session, shared, batch, check_moves, &mut ids)?;
+    }
+    Ok(())
+}
+
+/// Gives the version viewers hold its sum of responses, once the session has them.
+fn offer_sum(session: &Session, shared: &Shared, ids: &mut ResponseIds) -> anyhow::Result<()> {
+    if let Some(terms) = ids.terms(session, &shared.hub) {
+        let vertex_radiosity = finite(to_f32(&session.vertex_radiosity()))?;
+        shared.hub.attach_sum(&vertex_radiosity, terms);
     }
     Ok(())
 }
@@ -305,6 +326,7 @@ fn apply(
     shared: &Shared,
     batch: crate::control::edits::Batch,
     check_moves: bool,
+    ids: &mut ResponseIds,
 ) -> anyhow::Result<()> {
     let started = Instant::now();
     let mut refused = Vec::new();
@@ -380,7 +402,10 @@ fn apply(
         true => shared.health.recovered(Fault::Edit),
         false => shared.health.fault(Fault::Edit, refused.join("; ")),
     }
-    let version = shared.hub.publish(&vertex_radiosity, report.converged);
+    let terms = ids.terms(session, &shared.hub);
+    let version = shared
+        .hub
+        .publish_with_sum(&vertex_radiosity, report.converged, terms);
     tracing::info!(
         version,
         emissions = batch.emissions.len(),
@@ -393,6 +418,7 @@ fn apply(
     if moved {
         // Keep the lights' next edits instant on the moved scene.
         session.prepare_emitters();
+        offer_sum(session, shared, ids)?;
     }
     Ok(())
 }

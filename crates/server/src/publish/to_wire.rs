@@ -1,8 +1,11 @@
 //! Solver values as the wire carries them: the only place solver and wire types meet.
 
+use super::hub::Hub;
 use glam::DVec3;
-use solver::{Mesh, Rgb, Scene};
+use solver::{Mesh, Rgb, Scene, Session, TermKey};
+use std::collections::BTreeMap;
 use wire::geometry::{NO_CORNER, NO_TEXTURE, SurfaceTextures};
+use wire::responses::{Response, Term};
 use wire::summary::{
     ErrorEstimate, HierarchyCounts, ObjectRadiosity, ReadingError, SolveReport, StageSeconds,
     TargetOutcome, TargetStepOutcome,
@@ -12,6 +15,55 @@ use wire::{Camera, Geometry};
 /// Radiosity as the hub takes it.
 pub fn to_f32(radiosity: &[Rgb]) -> Vec<[f32; 3]> {
     radiosity.iter().map(|b| b.as_vec3().to_array()).collect()
+}
+
+/// The most responses a sum may add up. Each costs a viewer one full frame's bytes once and
+/// then 16 bytes an edit where a light's edit changes nearly every vertex (a frame's bytes
+/// each time), so it pays after a few edits; past this, a viewer's work per edit (terms times
+/// vertices) and its memory (12 bytes a vertex a term) outgrow a frame's decoding.
+pub const MAX_SUM_TERMS: usize = 16;
+
+/// The responses the hub holds for the session's [`Session::vertex_terms`], by the term they
+/// serve: each response is quantised and given an id once, until the session says its
+/// responses changed (a move, a new light).
+#[derive(Default)]
+pub struct ResponseIds {
+    epoch: Option<u64>,
+    ids: BTreeMap<TermKey, u32>,
+    next_id: u32,
+}
+
+impl ResponseIds {
+    /// The session's current values as terms of responses the hub holds (adding those it
+    /// lacks), or `None` when they are not a sum of responses yet or have too many terms.
+    pub fn terms(&mut self, session: &Session, hub: &Hub) -> Option<Vec<Term>> {
+        let (epoch, terms) = session.vertex_terms()?;
+        if terms.len() > MAX_SUM_TERMS {
+            return None;
+        }
+        if self.epoch != Some(epoch) {
+            hub.clear_responses();
+            self.ids.clear();
+            self.epoch = Some(epoch);
+        }
+        Some(
+            terms
+                .iter()
+                .map(|term| {
+                    let id = *self.ids.entry(term.key).or_insert_with(|| {
+                        let id = self.next_id;
+                        hub.add_response(Response::quantise(id, &to_f32(term.values)));
+                        self.next_id += 1;
+                        id
+                    });
+                    Term {
+                        response_id: id,
+                        weight: term.weight.as_vec3().to_array(),
+                    }
+                })
+                .collect(),
+        )
+    }
 }
 
 /// The geometry viewers fetch for `mesh`.
