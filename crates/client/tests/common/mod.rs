@@ -24,6 +24,8 @@ where
         loop {
             let (stream, _) = listener.accept().await.unwrap();
             let mut asked = false;
+            // The signature is tungstenite's handshake callback, its error type theirs.
+            #[allow(clippy::result_large_err)]
             let note = |request: &Request, response: Response| {
                 asked = request.headers().contains_key("Sec-WebSocket-Protocol");
                 Ok(response)
