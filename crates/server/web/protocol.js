@@ -1,11 +1,20 @@
-// The radcast wire protocol (docs/PROTOCOL.md, version 2) in JavaScript, written from the
-// document alone: the browser viewer's decoder, and a second implementation that the test
+// The radcast wire protocol (docs/PROTOCOL.md, versions 2 and 3) in JavaScript, written from
+// the document alone: the browser viewer's decoder, and a second implementation that the test
 // vectors in tests/vectors/ hold to the Rust one. No dependencies; every decoder throws an
 // Error naming what is wrong instead of returning garbage.
 
-export const PROTOCOL_VERSION = 2;
+/** The newest version spoken: ask for it with the WebSocket subprotocol `radcast.3`. */
+export const PROTOCOL_VERSION = 3;
+/** The oldest: frames only, what a server sends when no subprotocol was asked for. */
+export const PLAIN_PROTOCOL_VERSION = 2;
+/** The subprotocol names to offer, newest first. */
+export const SUBPROTOCOLS = ["radcast.3", "radcast.2"];
 
-const KIND = { hello: 1, full: 2, delta: 3, geometryChanged: 4, requestFull: 16 };
+const KIND = { hello: 1, full: 2, delta: 3, geometryChanged: 4, response: 5, sum: 6, requestFull: 16 };
+/** The most terms a sum frame may have. */
+const MAX_TERMS = 64;
+/** The largest weight a sum term may have (the emission rule), as an f32. */
+const MAX_WEIGHT = Math.fround(1e24);
 const FLAG_COMPRESSED = 1;
 const FLAG_FINAL = 2;
 /** The largest RGB9E5 value: (511 / 512) * 2^16. */
@@ -95,29 +104,41 @@ function codes(bytes, count, what) {
   return out;
 }
 
-function frameInfo(solutionVersion, sentAt, scale, vertexCount, flags) {
+function checkScale(scale) {
   const maxScale = Math.fround(F32_MAX / RGB9E5_MAX);
   if (!(scale > 0 && scale <= maxScale)) {
     throw new Error(`scale ${scale} must be positive and at most ${maxScale}`);
   }
+}
+
+function frameInfo(solutionVersion, sentAt, scale, vertexCount, flags) {
+  checkScale(scale);
   return { solutionVersion, sentAt, scale, vertexCount, isFinal: (flags & FLAG_FINAL) !== 0 };
 }
 
+/** The flags each kind may carry. */
+const ALLOWED_FLAGS = {
+  [KIND.full]: FLAG_COMPRESSED | FLAG_FINAL,
+  [KIND.delta]: FLAG_COMPRESSED | FLAG_FINAL,
+  [KIND.response]: FLAG_COMPRESSED,
+  [KIND.sum]: FLAG_FINAL,
+};
+
 /**
- * Decodes a server message. Returns `{kind: "hello" | "full" | "delta" | "geometry-changed", …}`
- * with u64 fields as BigInt.
+ * Decodes a server message. Returns `{kind: "hello" | "full" | "delta" | "geometry-changed" |
+ * "response" | "sum", …}` with u64 fields as BigInt.
  */
 export function decodeServerMessage(bytes) {
   const r = new Reader(bytes, "message");
   const kind = r.u8("kind");
   const flags = r.u8("flags");
-  const allowed = kind === KIND.full || kind === KIND.delta ? FLAG_COMPRESSED | FLAG_FINAL : 0;
+  const allowed = ALLOWED_FLAGS[kind] ?? 0;
   if (flags & ~allowed) throw new Error(`unknown flags 0x${flags.toString(16)} for kind ${kind}`);
   switch (kind) {
     case KIND.hello: {
       const protocolVersion = r.u16("protocol_version");
-      if (protocolVersion !== PROTOCOL_VERSION) {
-        throw new Error(`protocol version ${protocolVersion} is not supported (this side speaks ${PROTOCOL_VERSION})`);
+      if (protocolVersion < PLAIN_PROTOCOL_VERSION || protocolVersion > PROTOCOL_VERSION) {
+        throw new Error(`protocol version ${protocolVersion} is not supported (this side speaks ${PLAIN_PROTOCOL_VERSION} to ${PROTOCOL_VERSION})`);
       }
       const hello = {
         kind: "hello",
@@ -166,6 +187,32 @@ export function decodeServerMessage(bytes) {
       const message = { kind: "geometry-changed", geometryVersion: r.u64("geometry_version") };
       r.end();
       return message;
+    }
+    case KIND.response: {
+      const responseId = r.u32("response_id");
+      const scale = r.f32("scale");
+      checkScale(scale);
+      const vertexCount = r.u32("vertex_count");
+      const body = payload(r, flags & FLAG_COMPRESSED, 4 * vertexCount, "response");
+      return { kind: "response", responseId, scale, vertexCount, codes: codes(body, vertexCount, "response") };
+    }
+    case KIND.sum: {
+      const solutionVersion = r.u64("solution_version");
+      const sentAt = r.u64("sent_at");
+      const vertexCount = r.u32("vertex_count");
+      const termCount = r.u32("term_count");
+      if (termCount > MAX_TERMS) throw new Error(`sum term count ${termCount} exceeds ${MAX_TERMS}`);
+      const terms = [];
+      for (let k = 0; k < termCount; k++) {
+        const responseId = r.u32("term response_id");
+        const weight = [r.f32("weight"), r.f32("weight"), r.f32("weight")];
+        if (!weight.every((w) => Number.isFinite(w) && w >= 0 && w <= MAX_WEIGHT)) {
+          throw new Error(`sum weight ${weight} must be finite, at least 0 and at most 1e24`);
+        }
+        terms.push({ responseId, weight });
+      }
+      r.end();
+      return { kind: "sum", info: frameInfo(solutionVersion, sentAt, 1, vertexCount, flags), terms };
     }
     default:
       throw new Error(`unknown message kind ${kind}`);
@@ -301,23 +348,82 @@ export function checksum(colours) {
   return (crc ^ 0xffffffff) >>> 0;
 }
 
-/** A viewer's copy of the colours: full frames replace it, deltas against the held version apply. */
+/** CRC-32 (zlib's) of a sum's values as little-endian f32s: `/api/solution`'s `sum_checksum`. */
+export function sumChecksum(values) {
+  const bytes = new Uint8Array(4 * values.length);
+  const view = new DataView(bytes.buffer);
+  values.forEach((v, i) => view.setFloat32(4 * i, v, true));
+  let crc = 0xffffffff;
+  for (const b of bytes) crc = CRC_TABLE[(crc ^ b) & 0xff] ^ (crc >>> 8);
+  return (crc ^ 0xffffffff) >>> 0;
+}
+
+/**
+ * A viewer's copy of the colours: full frames replace it, deltas against the held version
+ * apply; with protocol 3, responses are kept (until the geometry changes) and a sum frame sets
+ * the values to its weighted sum of them.
+ */
 export class ColourBuffer {
   constructor() {
     this.info = null;
     this.colours = new Uint32Array(0);
+    /** Response id -> its values, r, g, b per vertex (f32, as decoded). */
+    this.responses = new Map();
+    /** The last sum's values (r, g, b per vertex) while a sum is the state held, else null. */
+    this.sum = null;
   }
-  /** Applies a decoded message; returns false for a delta whose base is not held (ask for a full frame). */
+  /**
+   * Applies a decoded message; returns false for a delta whose base is not held as codes (ask
+   * for a full frame). Throws for a sum that names a response not held.
+   */
   apply(message) {
     if (message.kind === "full") {
       this.colours = message.colours.slice();
       this.info = message.info;
+      this.sum = null;
     } else if (message.kind === "delta") {
-      const held = this.info && this.info.solutionVersion;
+      const held = this.sum === null && this.info && this.info.solutionVersion;
       if (held !== message.baseVersion || this.colours.length !== message.info.vertexCount) return false;
       message.indices.forEach((index, k) => { this.colours[index] = message.colours[k]; });
+      this.info = message.info;
+    } else if (message.kind === "geometry-changed") {
+      this.responses.clear();
+    } else if (message.kind === "response") {
+      const values = new Float32Array(3 * message.vertexCount);
+      message.codes.forEach((code, v) => values.set(decodeColour(code, message.scale), 3 * v));
+      this.responses.set(message.responseId, values);
+    } else if (message.kind === "sum") {
+      this.sum = evaluateSum(this.responses, message);
       this.info = message.info;
     }
     return true;
   }
+  /** Linear radiosity, W/m², r, g, b per vertex. */
+  radiosity() {
+    if (this.sum) return this.sum;
+    const values = new Float32Array(3 * this.colours.length);
+    if (this.info) this.colours.forEach((code, v) => values.set(decodeColour(code, this.info.scale), 3 * v));
+    return values;
+  }
+}
+
+/**
+ * A sum frame's values: per vertex and channel, from 0, add weight times value term by term in
+ * the frame's order in double precision (each product of two f32s is exact), then round to f32.
+ */
+function evaluateSum(responses, sum) {
+  const count = 3 * sum.info.vertexCount;
+  const terms = sum.terms.map((term) => {
+    const values = responses.get(term.responseId);
+    if (!values) throw new Error(`the sum names response ${term.responseId}, which this viewer does not hold`);
+    if (values.length !== count) throw new Error(`response ${term.responseId} has ${values.length / 3} vertices, the sum ${count / 3}`);
+    return [term.weight, values];
+  });
+  const out = new Float32Array(count);
+  for (let i = 0; i < count; i++) {
+    let total = 0;
+    for (const [weight, values] of terms) total += weight[i % 3] * values[i];
+    out[i] = total;
+  }
+  return out;
 }

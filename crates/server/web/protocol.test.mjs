@@ -8,7 +8,7 @@ import { readFileSync } from "node:fs";
 import { fileURLToPath } from "node:url";
 import { dirname, join } from "node:path";
 import {
-  ColourBuffer, checksum, decodeColour, decodeGeometry, decodeServerMessage, encodeRequestFull,
+  ColourBuffer, checksum, decodeColour, decodeGeometry, decodeServerMessage, encodeRequestFull, sumChecksum,
 } from "./protocol.js";
 
 const folder = join(dirname(fileURLToPath(import.meta.url)), "../../../tests/vectors");
@@ -52,6 +52,20 @@ function describe(m) {
       };
     case "geometry-changed":
       return { kind: "geometry-changed", geometry_version: m.geometryVersion.toString() };
+    case "response":
+      return {
+        kind: "response",
+        response_id: m.responseId,
+        scale: m.scale,
+        vertex_count: m.vertexCount,
+        codes: [...m.codes],
+      };
+    case "sum":
+      return {
+        kind: "sum",
+        info: info(m.info),
+        terms: m.terms.map((t) => ({ response_id: t.responseId, weight: t.weight })),
+      };
   }
 }
 
@@ -85,6 +99,7 @@ function roundF32(value) {
 }
 
 for (const [name, value] of Object.entries(expected)) {
+  if (name === "evaluation") continue; // no file: the sum of other vectors, tested below
   test(name, () => {
     const file = bytes(name);
     if (value === "refused") {
@@ -116,4 +131,19 @@ test("a buffer follows a full frame and its deltas, and refuses a foreign base",
   assert.deepEqual([...buffer.colours], changed);
   // A delta against version 5 no longer applies: the viewer asks for a full frame.
   assert.equal(buffer.apply(decodeServerMessage(bytes("delta-raw"))), false);
+});
+
+test("the sum of the checked-in responses is, bit for bit, what the Rust viewer computes", () => {
+  const evaluation = expected.evaluation;
+  const buffer = new ColourBuffer();
+  for (const name of evaluation.responses) buffer.apply(decodeServerMessage(bytes(name)));
+  buffer.apply(decodeServerMessage(bytes(evaluation.sum)));
+  const values = buffer.radiosity();
+  assert.deepEqual([...values], evaluation.values.flat().map(Math.fround));
+  assert.equal(sumChecksum(values), evaluation.sum_checksum);
+  assert.equal(buffer.info.solutionVersion, 9n);
+  // A delta cannot apply to a sum; a geometry change forgets the responses.
+  assert.equal(buffer.apply(decodeServerMessage(bytes("delta-empty-final"))), false);
+  buffer.apply(decodeServerMessage(bytes("geometry-changed")));
+  assert.throws(() => buffer.apply(decodeServerMessage(bytes(evaluation.sum))), /does not hold/);
 });

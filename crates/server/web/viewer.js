@@ -3,7 +3,7 @@
 // does (linear radiosity interpolated over fan triangles, textured patches times texel / mean
 // with the nearest texel, Reinhard tone map per pixel, sRGB).
 
-import { ColourBuffer, NO_TEXTURE, checksum, decodeColour, decodeGeometry, decodeServerMessage, encodeRequestFull } from "./protocol.js";
+import { ColourBuffer, NO_TEXTURE, SUBPROTOCOLS, checksum, decodeGeometry, decodeServerMessage, encodeRequestFull, sumChecksum } from "./protocol.js";
 import { exposure, fanTriangles } from "./display.js";
 import { togglePanel } from "./control.js";
 
@@ -211,9 +211,9 @@ function orbit(camera, yaw, pitch) {
 /** Uploads the current colours, decoded and exposed: the fragment shader tone-maps them. */
 function uploadColours() {
   const { geometry, buffer } = state;
-  if (!geometry || !buffer.info || buffer.colours.length !== geometry.positions.length / 3) return;
-  const radiosity = new Float32Array(buffer.colours.length * 3);
-  buffer.colours.forEach((code, v) => radiosity.set(decodeColour(code, buffer.info.scale), 3 * v));
+  if (!geometry || !buffer.info) return;
+  const radiosity = buffer.radiosity().slice();
+  if (radiosity.length !== geometry.positions.length) return;
   const k = exposure(geometry.positions, geometry.patches, radiosity, geometry.patchObjects, state.emitting) * 2 ** Number(exposureInput.value);
   for (let i = 0; i < radiosity.length; i++) radiosity[i] *= k;
   gl.bindBuffer(gl.ARRAY_BUFFER, radianceBuffer);
@@ -265,7 +265,8 @@ const percent = (ratio) => `${(100 * ratio).toFixed(1)}%`;
 
 function showStatus() {
   const info = state.buffer.info;
-  const local = info ? checksum(state.buffer.colours) : null;
+  const held = state.buffer.sum ? "sum" : "codes";
+  const local = !info ? null : held === "sum" ? sumChecksum(state.buffer.sum) : checksum(state.buffer.colours);
   const verified = state.serverChecksum === null ? "" : local === state.serverChecksum ? " ✓ matches /api/solution" : " ✗ differs from /api/solution";
   status.textContent = [
     state.connected ? "connected" : "reconnecting…",
@@ -278,6 +279,8 @@ function showStatus() {
   ].filter(Boolean).join(" · ");
   document.body.dataset.estimate = state.estimate === null ? "" : String(state.estimate.rms);
   document.body.dataset.checksum = local === null ? "" : String(local);
+  // What the checksum is of: the codes of frames, or (protocol 3) the values of a sum.
+  document.body.dataset.held = held;
   document.body.dataset.final = info && info.isFinal ? "true" : "false";
   document.body.dataset.version = info ? String(info.solutionVersion) : "";
   document.body.dataset.geometry = state.geometryVersion === null ? "" : String(state.geometryVersion);
@@ -307,14 +310,16 @@ async function fetchEmitting() {
 async function checkWithServer() {
   if (await fetchEmitting()) uploadColours();
   const summary = await (await fetch("api/solution")).json();
-  state.serverChecksum = state.buffer.info && BigInt(summary.solution_version) === state.buffer.info.solutionVersion ? summary.checksum : null;
+  const sameVersion = state.buffer.info && BigInt(summary.solution_version) === state.buffer.info.solutionVersion;
+  state.serverChecksum = !sameVersion ? null : state.buffer.sum ? summary.sum_checksum ?? null : summary.checksum;
   state.estimate = summary.report && summary.report.estimate ? summary.report.estimate.smooth : null;
   showStatus();
 }
 
 function connect() {
   // Relative to the page, so an edge serves it under /scenes/NAME/ too.
-  const socket = new WebSocket(new URL("ws", location.href.replace(/^http/, "ws")));
+  // Protocol 3 where the server speaks it: each light's response once, then only emissions.
+  const socket = new WebSocket(new URL("ws", location.href.replace(/^http/, "ws")), SUBPROTOCOLS);
   socket.binaryType = "arraybuffer";
   let queue = Promise.resolve();
   socket.onopen = () => { state.connected = true; showStatus(); };
@@ -324,8 +329,13 @@ function connect() {
     queue = queue.then(async () => {
       state.bytes += bytes.length;
       const message = decodeServerMessage(bytes);
+      if (message.kind === "response") {
+        state.buffer.apply(message);
+        return;
+      }
       if (message.kind === "hello" || message.kind === "geometry-changed") {
         if (message.kind === "hello") state.sceneId = message.sceneId;
+        state.buffer.apply(message);
         if (state.geometryVersion !== message.geometryVersion) {
           const [geometry, version] = await fetchGeometry(message.geometryVersion);
           await loadTextures(geometry, state.sceneId);

@@ -4,7 +4,6 @@
 //! little-endian fields (bincode 2 with fixed-width integers), then the payload.
 
 use crate::DecodeError;
-use crate::responses::{Response, SumFrame, Term, check_term_count, check_weight};
 use bincode::{Decode, Encode};
 use std::borrow::Cow;
 
@@ -96,6 +95,75 @@ pub struct DeltaFrame {
     pub indices: Vec<u32>,
     /// New codes, one per index.
     pub colours: Vec<u32>,
+}
+
+/// The most terms a sum frame may carry: bounds what a decoder allocates and what a viewer
+/// computes per edit (terms x vertices).
+pub const MAX_TERMS: u32 = 64;
+
+/// The largest weight a term may carry: the emission rule (W/m^2, what frames hold after
+/// reflections).
+pub const MAX_WEIGHT: f32 = 1e24;
+
+/// One emitter's response: the colour of every vertex per W/m^2 of its emission, channel by
+/// channel, quantised like a full frame (its own scale; values below zero are sent as zero).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Response {
+    /// Names it in sum frames; unique for the server's run (never reused, not even after a
+    /// move).
+    pub response_id: u32,
+    /// Decoded RGB9E5 values are multiplied by this (a power of two).
+    pub scale: f32,
+    /// One RGB9E5 code per geometry vertex.
+    pub codes: Vec<u32>,
+}
+
+impl Response {
+    /// The response `response_id` with these values (W/m^2 per W/m^2 of emission), at the
+    /// scale that fits its brightest channel.
+    pub fn quantise(response_id: u32, values: &[[f32; 3]]) -> Response {
+        let brightest = values
+            .iter()
+            .flatten()
+            .copied()
+            .filter(|c| c.is_finite())
+            .fold(0.0, f32::max);
+        let scale = crate::scale_for(brightest);
+        Response {
+            response_id,
+            scale,
+            codes: values
+                .iter()
+                .map(|v| crate::encode_colour(*v, scale))
+                .collect(),
+        }
+    }
+
+    /// Its values as a viewer holds them, W/m^2 per W/m^2: `decode_colour` of each code.
+    pub fn values(&self) -> Vec<[f32; 3]> {
+        self.codes
+            .iter()
+            .map(|c| crate::decode_colour(*c, self.scale))
+            .collect()
+    }
+}
+
+/// One term of a sum: a response and the emission it is weighted by.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Term {
+    /// A response the viewer was sent.
+    pub response_id: u32,
+    /// W/m^2 per channel: finite, at least 0 and at most [`MAX_WEIGHT`].
+    pub weight: [f32; 3],
+}
+
+/// A solution version as a weighted sum of responses the viewer holds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SumFrame {
+    /// Version, time, size and final flag; the scale is 1 (the values are W/m^2 already).
+    pub info: FrameInfo,
+    /// The terms, in the order they are added.
+    pub terms: Vec<Term>,
 }
 
 /// A message from the server.
@@ -267,142 +335,156 @@ impl ServerMessage {
     pub fn decode(bytes: &[u8]) -> Result<ServerMessage, DecodeError> {
         let (kind, flags, rest) = split_kind(bytes)?;
         match kind {
-            KIND_HELLO => {
-                check_flags(flags, 0)?;
-                let (hello, used): (Hello, usize) = decode_header(rest)?;
-                expect_end(&rest[used..])?;
-                if !(PLAIN_PROTOCOL_VERSION..=PROTOCOL_VERSION).contains(&hello.protocol_version) {
-                    return Err(DecodeError::UnsupportedVersion {
-                        got: hello.protocol_version,
-                        supported: PROTOCOL_VERSION,
-                    });
-                }
-                Ok(ServerMessage::Hello(hello))
-            }
-            KIND_FULL => {
-                check_flags(flags, FLAG_COMPRESSED | FLAG_FINAL)?;
-                let (header, used): (FullHeader, usize) = decode_header(rest)?;
-                check_vertex_count(header.vertex_count)?;
-                let expected = header.vertex_count as usize * 4;
-                let payload = take_payload(&rest[used..], flags, expected)?;
-                if payload.len() != expected {
-                    return Err(DecodeError::Length {
-                        what: "full frame colours",
-                        expected,
-                        got: payload.len(),
-                    });
-                }
-                let info = frame_info(
-                    header.solution_version,
-                    header.sent_at_unix_micros,
-                    header.scale,
-                    header.vertex_count,
-                    flags,
-                )?;
-                Ok(ServerMessage::Full(FullFrame {
-                    info,
-                    colours: read_codes(&payload),
-                }))
-            }
-            KIND_DELTA => {
-                check_flags(flags, FLAG_COMPRESSED | FLAG_FINAL)?;
-                let (header, used): (DeltaHeader, usize) = decode_header(rest)?;
-                check_vertex_count(header.vertex_count)?;
-                if header.change_count > header.vertex_count {
-                    return Err(DecodeError::TooLarge {
-                        what: "delta change count",
-                        size: header.change_count as u64,
-                        limit: header.vertex_count as u64,
-                    });
-                }
-                // Each change takes at most 5 varint bytes and 4 colour bytes.
-                let payload = take_payload(&rest[used..], flags, header.change_count as usize * 9)?;
-                let (indices, colour_bytes) =
-                    read_indices(&payload, header.change_count, header.vertex_count)?;
-                let expected = header.change_count as usize * 4;
-                if colour_bytes.len() != expected {
-                    return Err(DecodeError::Length {
-                        what: "delta colours",
-                        expected,
-                        got: colour_bytes.len(),
-                    });
-                }
-                let info = frame_info(
-                    header.solution_version,
-                    header.sent_at_unix_micros,
-                    header.scale,
-                    header.vertex_count,
-                    flags,
-                )?;
-                Ok(ServerMessage::Delta(DeltaFrame {
-                    base_version: header.base_version,
-                    info,
-                    indices,
-                    colours: read_codes(colour_bytes),
-                }))
-            }
+            KIND_HELLO => decode_hello(flags, rest),
+            KIND_FULL => decode_full(flags, rest),
+            KIND_DELTA => decode_delta(flags, rest),
             KIND_GEOMETRY_CHANGED => {
                 check_flags(flags, 0)?;
                 let (geometry_version, used): (u64, usize) = decode_header(rest)?;
                 expect_end(&rest[used..])?;
                 Ok(ServerMessage::GeometryChanged { geometry_version })
             }
-            KIND_RESPONSE => {
-                check_flags(flags, FLAG_COMPRESSED)?;
-                let (header, used): (ResponseHeader, usize) = decode_header(rest)?;
-                check_vertex_count(header.vertex_count)?;
-                check_scale(header.scale)?;
-                let expected = header.vertex_count as usize * 4;
-                let payload = take_payload(&rest[used..], flags, expected)?;
-                if payload.len() != expected {
-                    return Err(DecodeError::Length {
-                        what: "response codes",
-                        expected,
-                        got: payload.len(),
-                    });
-                }
-                Ok(ServerMessage::Response(Response {
-                    response_id: header.response_id,
-                    scale: header.scale,
-                    codes: read_codes(&payload),
-                }))
-            }
-            KIND_SUM => {
-                check_flags(flags, FLAG_FINAL)?;
-                let (header, used): (SumHeader, usize) = decode_header(rest)?;
-                check_term_count(header.term_count, header.vertex_count)?;
-                let body = &rest[used..];
-                let expected = header.term_count as usize * TERM_BYTES;
-                if body.len() != expected {
-                    return Err(DecodeError::Length {
-                        what: "sum terms",
-                        expected,
-                        got: body.len(),
-                    });
-                }
-                let terms = body
-                    .chunks_exact(TERM_BYTES)
-                    .map(|t| {
-                        let word = |k: usize| [t[4 * k], t[4 * k + 1], t[4 * k + 2], t[4 * k + 3]];
-                        let weight = [1, 2, 3].map(|k| f32::from_le_bytes(word(k)));
-                        Ok(Term {
-                            response_id: u32::from_le_bytes(word(0)),
-                            weight: check_weight(weight)?,
-                        })
-                    })
-                    .collect::<Result<_, DecodeError>>()?;
-                let info = frame_info(
-                    header.solution_version,
-                    header.sent_at_unix_micros,
-                    1.0,
-                    header.vertex_count,
-                    flags,
-                )?;
-                Ok(ServerMessage::Sum(SumFrame { info, terms }))
-            }
+            KIND_RESPONSE => decode_response(flags, rest),
+            KIND_SUM => decode_sum(flags, rest),
             other => Err(DecodeError::UnknownKind(other)),
         }
     }
+}
+
+/// A hello of a version this crate speaks.
+fn decode_hello(flags: u8, rest: &[u8]) -> Result<ServerMessage, DecodeError> {
+    check_flags(flags, 0)?;
+    let (hello, used): (Hello, usize) = decode_header(rest)?;
+    expect_end(&rest[used..])?;
+    if !(PLAIN_PROTOCOL_VERSION..=PROTOCOL_VERSION).contains(&hello.protocol_version) {
+        return Err(DecodeError::UnsupportedVersion {
+            got: hello.protocol_version,
+            supported: PROTOCOL_VERSION,
+        });
+    }
+    Ok(ServerMessage::Hello(hello))
+}
+
+/// A full frame: every vertex's code.
+fn decode_full(flags: u8, rest: &[u8]) -> Result<ServerMessage, DecodeError> {
+    check_flags(flags, FLAG_COMPRESSED | FLAG_FINAL)?;
+    let (header, used): (FullHeader, usize) = decode_header(rest)?;
+    check_vertex_count(header.vertex_count)?;
+    let expected = header.vertex_count as usize * 4;
+    let payload = take_payload(&rest[used..], flags, expected)?;
+    if payload.len() != expected {
+        return Err(DecodeError::Length {
+            what: "full frame colours",
+            expected,
+            got: payload.len(),
+        });
+    }
+    let info = frame_info(
+        header.solution_version,
+        header.sent_at_unix_micros,
+        header.scale,
+        header.vertex_count,
+        flags,
+    )?;
+    Ok(ServerMessage::Full(FullFrame {
+        info,
+        colours: read_codes(&payload),
+    }))
+}
+
+/// A delta frame: gap-encoded indices, then their codes.
+fn decode_delta(flags: u8, rest: &[u8]) -> Result<ServerMessage, DecodeError> {
+    check_flags(flags, FLAG_COMPRESSED | FLAG_FINAL)?;
+    let (header, used): (DeltaHeader, usize) = decode_header(rest)?;
+    check_vertex_count(header.vertex_count)?;
+    if header.change_count > header.vertex_count {
+        return Err(DecodeError::TooLarge {
+            what: "delta change count",
+            size: header.change_count as u64,
+            limit: header.vertex_count as u64,
+        });
+    }
+    // Each change takes at most 5 varint bytes and 4 colour bytes.
+    let payload = take_payload(&rest[used..], flags, header.change_count as usize * 9)?;
+    let (indices, colour_bytes) = read_indices(&payload, header.change_count, header.vertex_count)?;
+    let expected = header.change_count as usize * 4;
+    if colour_bytes.len() != expected {
+        return Err(DecodeError::Length {
+            what: "delta colours",
+            expected,
+            got: colour_bytes.len(),
+        });
+    }
+    let info = frame_info(
+        header.solution_version,
+        header.sent_at_unix_micros,
+        header.scale,
+        header.vertex_count,
+        flags,
+    )?;
+    Ok(ServerMessage::Delta(DeltaFrame {
+        base_version: header.base_version,
+        info,
+        indices,
+        colours: read_codes(colour_bytes),
+    }))
+}
+
+/// Protocol 3: one emitter's response, codes like a full frame's.
+fn decode_response(flags: u8, rest: &[u8]) -> Result<ServerMessage, DecodeError> {
+    check_flags(flags, FLAG_COMPRESSED)?;
+    let (header, used): (ResponseHeader, usize) = decode_header(rest)?;
+    check_vertex_count(header.vertex_count)?;
+    check_scale(header.scale)?;
+    let expected = header.vertex_count as usize * 4;
+    let payload = take_payload(&rest[used..], flags, expected)?;
+    if payload.len() != expected {
+        return Err(DecodeError::Length {
+            what: "response codes",
+            expected,
+            got: payload.len(),
+        });
+    }
+    Ok(ServerMessage::Response(Response {
+        response_id: header.response_id,
+        scale: header.scale,
+        codes: read_codes(&payload),
+    }))
+}
+
+/// Protocol 3: a sum frame, its terms checked.
+fn decode_sum(flags: u8, rest: &[u8]) -> Result<ServerMessage, DecodeError> {
+    check_flags(flags, FLAG_FINAL)?;
+    let (header, used): (SumHeader, usize) = decode_header(rest)?;
+    check_term_count(header.term_count, header.vertex_count)?;
+    let body = &rest[used..];
+    let expected = header.term_count as usize * TERM_BYTES;
+    if body.len() != expected {
+        return Err(DecodeError::Length {
+            what: "sum terms",
+            expected,
+            got: body.len(),
+        });
+    }
+    let terms = body
+        .chunks_exact(TERM_BYTES)
+        .map(|t| {
+            let word = |k: usize| [t[4 * k], t[4 * k + 1], t[4 * k + 2], t[4 * k + 3]];
+            let weight = [1, 2, 3].map(|k| f32::from_le_bytes(word(k)));
+            Ok(Term {
+                response_id: u32::from_le_bytes(word(0)),
+                weight: check_weight(weight)?,
+            })
+        })
+        .collect::<Result<_, DecodeError>>()?;
+    let info = frame_info(
+        header.solution_version,
+        header.sent_at_unix_micros,
+        1.0,
+        header.vertex_count,
+        flags,
+    )?;
+    Ok(ServerMessage::Sum(SumFrame { info, terms }))
 }
 
 impl ClientMessage {
@@ -438,6 +520,33 @@ fn split_kind(bytes: &[u8]) -> Result<(u8, u8, &[u8]), DecodeError> {
     }
 }
 
+/// The checks a decoded term must pass.
+fn check_weight(weight: [f32; 3]) -> Result<[f32; 3], DecodeError> {
+    if weight
+        .iter()
+        .all(|w| w.is_finite() && (0.0..=MAX_WEIGHT).contains(w))
+    {
+        Ok(weight)
+    } else {
+        Err(DecodeError::Invalid(format!(
+            "sum weight {weight:?} must be finite, at least 0 and at most {MAX_WEIGHT:e}"
+        )))
+    }
+}
+
+/// The checks a decoded term count must pass.
+fn check_term_count(count: u32, vertex_count: u32) -> Result<(), DecodeError> {
+    check_vertex_count(vertex_count)?;
+    if count > MAX_TERMS {
+        return Err(DecodeError::TooLarge {
+            what: "sum term count",
+            size: count as u64,
+            limit: MAX_TERMS as u64,
+        });
+    }
+    Ok(())
+}
+
 fn check_flags(flags: u8, allowed: u8) -> Result<(), DecodeError> {
     if flags & !allowed != 0 {
         Err(DecodeError::UnknownFlags(flags))
@@ -446,7 +555,7 @@ fn check_flags(flags: u8, allowed: u8) -> Result<(), DecodeError> {
     }
 }
 
-pub(crate) fn check_vertex_count(count: u32) -> Result<(), DecodeError> {
+fn check_vertex_count(count: u32) -> Result<(), DecodeError> {
     if count > MAX_VERTICES {
         Err(DecodeError::TooLarge {
             what: "vertex count",

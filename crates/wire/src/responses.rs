@@ -8,78 +8,9 @@
 //! does so that every implementation computes the same f32 values and [`sum_checksum`] of
 //! them.
 
-use crate::frame::{FrameInfo, check_vertex_count};
-use crate::{DecodeError, rgb9e5};
+pub use crate::frame::{MAX_TERMS, MAX_WEIGHT, Response, SumFrame, Term};
+use crate::rgb9e5;
 use std::collections::BTreeMap;
-
-/// The most terms a sum frame may carry: bounds what a decoder allocates and what a viewer
-/// computes per edit (terms x vertices).
-pub const MAX_TERMS: u32 = 64;
-
-/// The largest weight a term may carry: the emission rule (W/m^2, what frames hold after
-/// reflections).
-pub const MAX_WEIGHT: f32 = 1e24;
-
-/// One emitter's response: the colour of every vertex per W/m^2 of its emission, channel by
-/// channel, quantised like a full frame (its own scale; values below zero are sent as zero).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Response {
-    /// Names it in sum frames; unique for the server's run (never reused, not even after a
-    /// move).
-    pub response_id: u32,
-    /// Decoded RGB9E5 values are multiplied by this (a power of two).
-    pub scale: f32,
-    /// One RGB9E5 code per geometry vertex.
-    pub codes: Vec<u32>,
-}
-
-impl Response {
-    /// The response `response_id` with these values (W/m^2 per W/m^2 of emission), at the
-    /// scale that fits its brightest channel.
-    pub fn quantise(response_id: u32, values: &[[f32; 3]]) -> Response {
-        let brightest = values
-            .iter()
-            .flatten()
-            .copied()
-            .filter(|c| c.is_finite())
-            .fold(0.0, f32::max);
-        let scale = crate::scale_for(brightest);
-        Response {
-            response_id,
-            scale,
-            codes: values
-                .iter()
-                .map(|v| crate::encode_colour(*v, scale))
-                .collect(),
-        }
-    }
-
-    /// Its values as a viewer holds them, W/m^2 per W/m^2: `decode_colour` of each code.
-    pub fn values(&self) -> Vec<[f32; 3]> {
-        self.codes
-            .iter()
-            .map(|c| crate::decode_colour(*c, self.scale))
-            .collect()
-    }
-}
-
-/// One term of a sum: a response and the emission it is weighted by.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Term {
-    /// A response the viewer was sent.
-    pub response_id: u32,
-    /// W/m^2 per channel: finite, at least 0 and at most [`MAX_WEIGHT`].
-    pub weight: [f32; 3],
-}
-
-/// A solution version as a weighted sum of responses the viewer holds.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SumFrame {
-    /// Version, time, size and final flag; the scale is 1 (the values are W/m^2 already).
-    pub info: FrameInfo,
-    /// The terms, in the order they are added.
-    pub terms: Vec<Term>,
-}
 
 /// What can be wrong with a sum frame against the responses a viewer holds.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -207,36 +138,10 @@ pub fn sum_checksum(values: &[[f32; 3]]) -> u32 {
     hasher.finalize()
 }
 
-/// The checks a decoded term must pass.
-pub(crate) fn check_weight(weight: [f32; 3]) -> Result<[f32; 3], DecodeError> {
-    if weight
-        .iter()
-        .all(|w| w.is_finite() && (0.0..=MAX_WEIGHT).contains(w))
-    {
-        Ok(weight)
-    } else {
-        Err(DecodeError::Invalid(format!(
-            "sum weight {weight:?} must be finite, at least 0 and at most {MAX_WEIGHT:e}"
-        )))
-    }
-}
-
-/// The checks a decoded term count must pass.
-pub(crate) fn check_term_count(count: u32, vertex_count: u32) -> Result<(), DecodeError> {
-    check_vertex_count(vertex_count)?;
-    if count > MAX_TERMS {
-        return Err(DecodeError::TooLarge {
-            what: "sum term count",
-            size: count as u64,
-            limit: MAX_TERMS as u64,
-        });
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::FrameInfo;
 
     fn info(vertex_count: u32) -> FrameInfo {
         FrameInfo {

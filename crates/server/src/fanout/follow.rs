@@ -204,6 +204,7 @@ fn take_record(shared: &Shared, scene: &str, record: SceneRecord, version: u64) 
     }
     *shared.report.lock().expect("report lock") = record.report;
     *shared.emissions.lock().expect("emissions lock") = record.emissions;
+    *upstream(shared).sum_checksum.lock().expect("sum lock") = record.sum_checksum;
     match record.health.as_str() {
         "ok" => shared.health.recovered(crate::health::Fault::Origin),
         other => shared.health.fault(
@@ -266,6 +267,7 @@ impl Edge {
             last_heard: Instant::now().into(),
             record_version: 0.into(),
             stale: false.into(),
+            sum_checksum: None.into(),
         };
         let hub = Hub::restore(snapshot.geometry, snapshot.state);
         let shared = Shared::in_process(self.process.clone(), hub, String::new(), Some(upstream));

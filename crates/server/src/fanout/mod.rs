@@ -154,6 +154,10 @@ pub struct SceneRecord {
     pub emissions: Vec<(String, [f64; 3])>,
     /// The origin's `/healthz` text: `ok`, `degraded: …` or `down: …`.
     pub health: String,
+    /// The `sum_checksum` of the origin's `/api/solution` and the version it is of (edges
+    /// serve frames only, but the same `/api/solution`).
+    #[serde(default)]
+    pub sum_checksum: Option<(u64, u32)>,
 }
 
 /// Which snapshot an object is: its version, geometry version, run and scene id.
@@ -272,6 +276,8 @@ pub struct Upstream {
     /// Set when a frame could not be applied (a gap, a newer geometry not yet stored): the
     /// snapshot is read again.
     pub stale: std::sync::atomic::AtomicBool,
+    /// The origin's sum checksum and its version, from the record in use.
+    pub sum_checksum: std::sync::Mutex<Option<(u64, u32)>>,
 }
 
 impl Upstream {

@@ -117,6 +117,10 @@ async fn publish_newest(
         report: shared.report.lock().expect("report lock").clone(),
         emissions: shared.emissions.lock().expect("emissions lock").clone(),
         health: shared.health.text(),
+        sum_checksum: current
+            .sum
+            .as_ref()
+            .map(|sum| (current.version, sum.checksum)),
     };
     let record_json = match sent.as_ref().map(|s| &s.record) != Some(&record) {
         true => Some(serde_json::to_vec(&record)?),

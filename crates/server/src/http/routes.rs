@@ -120,7 +120,16 @@ pub fn solution_summary(shared: &Shared) -> SolutionSummary {
         is_final: current.is_final,
         checksum: current.checksum,
         scale: current.scale,
-        sum_checksum: current.sum.as_ref().map(|sum| sum.checksum),
+        // An edge serves frames only, and the origin's checksum of the version's sum.
+        sum_checksum: match &shared.upstream {
+            None => current.sum.as_ref().map(|sum| sum.checksum),
+            Some(upstream) => upstream
+                .sum_checksum
+                .lock()
+                .expect("sum lock")
+                .filter(|(version, _)| *version == current.version)
+                .map(|(_, checksum)| checksum),
+        },
         report: shared.report.lock().ok().and_then(|r| r.clone()),
     }
 }
@@ -227,9 +236,10 @@ async fn websocket(
     let limits = shared.process.limits;
     // Viewers send only tiny control messages and every frame is flushed as it is sent, so
     // small buffers do: tungstenite's 128 KiB defaults made each idle viewer cost 144 KB.
-    let upgrade = match protocol {
-        wire::PLAIN_PROTOCOL_VERSION => upgrade,
-        newer => upgrade.protocols([wire::subprotocol(newer)]),
+    // A viewer that offered subprotocols must get the chosen one named back (RFC 6455, 4.1).
+    let upgrade = match headers.contains_key(header::SEC_WEBSOCKET_PROTOCOL) {
+        true => upgrade.protocols([wire::subprotocol(protocol)]),
+        false => upgrade,
     };
     upgrade
         .read_buffer_size(4096)

@@ -330,28 +330,7 @@ fn apply(
 ) -> anyhow::Result<()> {
     let started = Instant::now();
     let mut refused = Vec::new();
-    let mut moved = false;
-    for (object, motion) in batch
-        .moves
-        .iter()
-        .flat_map(|(object, moves)| moves.iter().map(move |m| (object, *m)))
-    {
-        match session.move_object(object, motion) {
-            Ok(report) => {
-                moved = true;
-                let ms = report.seconds * 1e3;
-                match report.work {
-                    MoveWork::Dense(work) => {
-                        tracing::info!(object, work.pairs, work.entries, ms, "moved")
-                    }
-                    MoveWork::Rebuilt(hierarchy) => {
-                        tracing::info!(object, hierarchy.elements, hierarchy.links, ms, "moved")
-                    }
-                }
-            }
-            Err(error) => refused.push(format!("the move of '{object}' was refused: {error}")),
-        }
-    }
+    let moved = apply_moves(session, &batch, &mut refused);
     // The moved scene from the current answer, then its new geometry for viewers.
     let moved_report = moved.then(|| session.solve(&solver::no_progress));
     if moved {
@@ -421,6 +400,38 @@ fn apply(
         offer_sum(session, shared, ids)?;
     }
     Ok(())
+}
+
+/// Applies the moves of `batch` in order; returns whether any was applied, and adds why to
+/// `refused` for each the session refused.
+fn apply_moves(
+    session: &mut Session,
+    batch: &crate::control::edits::Batch,
+    refused: &mut Vec<String>,
+) -> bool {
+    let mut moved = false;
+    for (object, motion) in batch
+        .moves
+        .iter()
+        .flat_map(|(object, moves)| moves.iter().map(move |m| (object, *m)))
+    {
+        match session.move_object(object, motion) {
+            Ok(report) => {
+                moved = true;
+                let ms = report.seconds * 1e3;
+                match report.work {
+                    MoveWork::Dense(work) => {
+                        tracing::info!(object, work.pairs, work.entries, ms, "moved")
+                    }
+                    MoveWork::Rebuilt(hierarchy) => {
+                        tracing::info!(object, hierarchy.elements, hierarchy.links, ms, "moved")
+                    }
+                }
+            }
+            Err(error) => refused.push(format!("the move of '{object}' was refused: {error}")),
+        }
+    }
+    moved
 }
 
 /// The self-check of `session`'s answer after a solve of `solve_seconds`, logged, its
