@@ -859,7 +859,7 @@ async fn after_any_sequence_of_edits_over_http_a_hierarchical_server_serves_a_fr
 /// checked against a fresh solve of the scene as edited (see the two tests above).
 async fn edits_over_http_match_fresh_solves(request: SolveRequest, seed: u64) {
     let hierarchical = request.hierarchy.is_some();
-    let (address, shared, _edit_loop) = live("scenes/cornell-box.obj", request.clone()).await;
+    let (address, shared, _edit_loop) = live("scenes/cornell-box.obj", request).await;
     let mut viewer = Viewer::connect(address).await;
     viewer.wait_for(|_| true).await;
     // Protocol 3: the light's response once, then sums.
