@@ -366,15 +366,28 @@ impl Session {
         &self.mesh
     }
 
-    /// The self-check of the current answer ([`crate::check`]).
+    /// The self-check of the current answer ([`crate::check`]), traced in the scene as edited.
     pub fn self_check(&self, settings: &CheckSettings) -> Estimate {
+        let lit = self.edited_scene();
         crate::check::self_check(
-            &self.scene,
-            &Occluders::new(&self.scene),
+            &lit,
+            &Occluders::new(&lit),
             &self.mesh,
             (&self.radiosity, &self.vertex_radiosity()),
             settings,
         )
+    }
+
+    /// The scene with the emission edits since the last move applied to its faces (a move
+    /// folds them into the scene itself).
+    fn edited_scene(&self) -> Scene {
+        let mut lit = self.scene.clone();
+        for face in &mut lit.faces {
+            if let Some(emission) = self.edited.get(&face.object) {
+                face.emission = *emission;
+            }
+        }
+        lit
     }
 
     /// The hierarchy's statistics, for a hierarchical session.
@@ -563,12 +576,7 @@ impl Session {
         self.terms_epoch += 1;
         // Gathered at the emissions as edited: each emitter's share of the rays is what a
         // fresh solve of the edited scene gives it.
-        let mut lit = self.scene.clone();
-        for face in &mut lit.faces {
-            if let Some(emission) = self.edited.get(&face.object) {
-                face.emission = *emission;
-            }
-        }
+        let lit = self.edited_scene();
         let occluders = Occluders::new(&lit);
         self.corner_light = CornerLight::new(&lit, &self.mesh, &occluders, &self.lights);
         // The vertex values summed so far, gathered again alike (each light's share of the
@@ -936,6 +944,25 @@ mod tests {
         );
         live.prepare_emitters();
         assert!(live.vertex_terms().unwrap().0 > epoch);
+    }
+
+    #[test]
+    fn the_self_check_of_an_edited_session_traces_the_light_as_edited() {
+        // Dimming a lamp scales the answer and the reference alike: the relative error the
+        // check estimates stays where it was (it was 100% when the check traced the scene as
+        // loaded against the answer as edited).
+        let scene = two_lamp_box();
+        let mut live = session(&scene);
+        live.solve(&no_progress);
+        let settings = CheckSettings::after_solve(0.0);
+        let before = live.self_check(&settings).smooth.rms;
+        live.set_emission("floor", Rgb::new(0.5, 0.25, 0.0))
+            .unwrap();
+        live.set_emission("ceiling", Rgb::new(0.0, 1.0, 0.5))
+            .unwrap();
+        live.solve(&no_progress);
+        let after = live.self_check(&settings).smooth.rms;
+        assert!((after - before).abs() < 0.01, "{before} -> {after}");
     }
 
     #[test]
