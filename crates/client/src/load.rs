@@ -27,6 +27,12 @@ pub struct ViewerStats {
     pub arrivals: Vec<(u64, u64)>,
     /// Every message as (receive time, bytes), responses and hellos included.
     pub received: Vec<(u64, u64)>,
+    /// Frames whose version was below the one held before (a version going back).
+    pub out_of_order: u64,
+    /// The version of the last frame applied.
+    pub last_version: u64,
+    /// What the viewer held when the run ended.
+    pub last: Option<wire::ColourBuffer>,
     /// Frame latencies, microseconds (receive time minus the frame's send stamp), for frames
     /// published after the viewer connected: the frame a viewer joins with carries the stamp
     /// of a state published earlier, which measures its age, not delivery.
@@ -100,6 +106,11 @@ pub async fn run_viewer(
             Ok(Step::Hello(_) | Step::GeometryChanged { .. } | Step::Response { .. }) => {}
             Ok(Step::Applied { info, .. }) => {
                 let sent_at = info.sent_at_unix_micros;
+                // A sum may bring the version held as frames again (it gained its sum).
+                if stats.frames > 0 && info.solution_version < stats.last_version {
+                    stats.out_of_order += 1;
+                }
+                stats.last_version = info.solution_version;
                 stats.frames += 1;
                 stats.bytes += data.len() as u64;
                 stats.arrivals.push((sent_at, received));
@@ -117,6 +128,7 @@ pub async fn run_viewer(
         }
     }
     let _ = socket.close(None).await;
+    stats.last = Some(viewer.into_buffer());
     stats
 }
 
@@ -184,6 +196,12 @@ pub struct LoadReport {
     /// With `--edit`: bytes each connected viewer received from the first edit on, per edit
     /// (every message: frames, sums and the responses they need).
     pub bytes_per_viewer_per_edit: Option<f64>,
+    /// The server's version when the run ended (`/api/solution`).
+    pub final_version: u64,
+    /// Connected viewers that ended holding exactly it (its checksum, or its sum's).
+    pub viewers_on_final_version: usize,
+    /// Frames, over all viewers, whose version was below the one the viewer held.
+    pub versions_out_of_order: u64,
     /// CPU this load tester used during the run, percent of one core (Linux; absent elsewhere):
     /// on one machine it competes with the server, which bounds what latency can show.
     pub load_tester_cpu_percent: Option<f64>,
@@ -230,6 +248,7 @@ pub fn summarize(
     server: Vec<(String, f64)>,
     load_tester_cpu_percent: Option<f64>,
     edits_us: &[u64],
+    solution: &wire::SolutionSummary,
 ) -> LoadReport {
     let clients = stats.len();
     let connected: Vec<&ViewerStats> = stats.iter().filter(|s| s.connected).collect();
@@ -278,6 +297,12 @@ pub fn summarize(
                 .sum();
             bytes as f64 / (connected.len().max(1) * edits_us.len()) as f64
         }),
+        final_version: solution.solution_version,
+        viewers_on_final_version: connected
+            .iter()
+            .filter(|s| s.last.as_ref().is_some_and(|b| b.matches(solution)))
+            .count(),
+        versions_out_of_order: stats.iter().map(|s| s.out_of_order).sum(),
         load_tester_cpu_percent,
         server,
     }

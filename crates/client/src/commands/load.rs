@@ -37,6 +37,12 @@ pub struct LoadCommand {
     /// Emission for --edit, `r,g,b`.
     #[arg(long, default_value = "17,12,4")]
     pub edit_emission: String,
+    /// Seconds between edits (with --edit).
+    #[arg(long, default_value_t = 1.0)]
+    pub edit_every: f64,
+    /// With --edit, make every other edit a move of this object, 10 units along x and back.
+    #[arg(long = "move", requires = "edit")]
+    pub move_object: Option<String>,
     /// The server's control token, for --edit.
     #[arg(long, env = "RADCAST_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
@@ -53,15 +59,18 @@ impl LoadCommand {
             json,
             edit,
             edit_emission,
+            edit_every,
+            move_object,
             token,
         } = self;
+        let every = positive_seconds(edit_every, "edit-every")?;
         let editor = match edit {
             // Edits go to the first server; an edge passes them to its origin.
             Some(object) => Some(Editor::new(
                 &urls[0],
-                object,
+                (object, move_object),
                 &edit_emission,
-                token.unwrap_or_default(),
+                (token.unwrap_or_default(), every),
             )?),
             None => None,
         };
@@ -111,7 +120,11 @@ impl LoadCommand {
         let cpu = cpu_at_start
             .zip(client::load::process_cpu_seconds())
             .map(|(a, b)| 100.0 * (b - a) / started.elapsed().as_secs_f64());
-        let report = client::load::summarize(stats, metrics, cpu, &edit_times);
+        let solution = {
+            let base = http_base(&urls[0])?;
+            tokio::task::spawn_blocking(move || client::fetch_solution(&base)).await?
+        }?;
+        let report = client::load::summarize(stats, metrics, cpu, &edit_times, &solution);
         match json {
             true => say!("{}", serde_json::to_string(&report)?),
             false => print_report(&report)?,
@@ -120,15 +133,26 @@ impl LoadCommand {
     }
 }
 
-/// Emission edits issued during a load run.
+/// Edits issued during a load run: emissions, and moves when asked for.
 struct Editor {
-    url: String,
+    emission_url: String,
+    move_url: Option<String>,
     token: String,
     emission: [f64; 3],
+    every: Duration,
 }
 
+/// The seconds the last edit leaves before the run ends, for the server to solve it and every
+/// viewer to get it: the run's end then checks what each viewer holds.
+const SETTLE: Duration = Duration::from_secs(3);
+
 impl Editor {
-    fn new(ws_url: &str, object: String, emission: &str, token: String) -> anyhow::Result<Editor> {
+    fn new(
+        ws_url: &str,
+        (object, move_object): (String, Option<String>),
+        emission: &str,
+        (token, every): (String, Duration),
+    ) -> anyhow::Result<Editor> {
         let values: Vec<f64> = emission
             .split(',')
             .map(|v| v.trim().parse::<f64>())
@@ -137,14 +161,17 @@ impl Editor {
         let [r, g, b] = values[..] else {
             bail!("--edit-emission '{emission}' needs three numbers")
         };
+        let base = http_base(ws_url)?;
         Ok(Editor {
-            url: format!("{}/api/objects/{object}/emission", http_base(ws_url)?),
+            emission_url: format!("{base}/api/objects/{object}/emission"),
+            move_url: move_object.map(|o| format!("{base}/api/objects/{o}/transform")),
             token,
             emission: [r, g, b],
+            every,
         })
     }
 
-    /// Edits once a second from when every viewer is connected (after `ramp`) to a second
+    /// Edits every `every` from when every viewer is connected (after `ramp`) to [`SETTLE`]
     /// before `deadline`, on a thread of its own; the task gives each edit's time, µs.
     fn spawn(
         self,
@@ -155,27 +182,41 @@ impl Editor {
             std::thread::sleep(ramp + Duration::from_millis(500)); // wait out the ramp: pacing, not synchronisation
             let mut times = Vec::new();
             for k in 0.. {
-                if std::time::Instant::now() + Duration::from_secs(1) >= deadline {
+                if std::time::Instant::now() + SETTLE >= deadline {
                     break;
                 }
                 times.push(self.send(k)?);
-                std::thread::sleep(Duration::from_secs(1)); // one edit a second
+                std::thread::sleep(self.every); // the edit rate asked for: pacing
             }
             Ok(times)
         })
     }
 
-    /// Sends edit number `k` (half the emission when even, full when odd, so the first edit
-    /// changes a scene that starts at full); returns its time, µs.
+    /// Sends edit number `k`: with a move object, odd edits move it 10 units along +x or back
+    /// (in turn); the others set half the emission or all of it (in turn, so the first edit
+    /// changes a scene that starts at full). Returns its time, µs.
     fn send(&self, k: u64) -> anyhow::Result<u64> {
-        let factor = if k % 2 == 0 { 0.5 } else { 1.0 };
-        let body = serde_json::json!({ "emission": self.emission.map(|c| c * factor) }).to_string();
+        let (url, body) = match (&self.move_url, k % 2) {
+            (Some(url), 1) => {
+                let x = if k % 4 == 1 { 10.0 } else { -10.0 };
+                (url, serde_json::json!({ "translate": [x, 0.0, 0.0] }))
+            }
+            _ => {
+                let emissions = if self.move_url.is_some() { k / 2 } else { k };
+                let factor = if emissions % 2 == 0 { 0.5 } else { 1.0 };
+                let emission = self.emission.map(|c| c * factor);
+                (
+                    &self.emission_url,
+                    serde_json::json!({ "emission": emission }),
+                )
+            }
+        };
         let at = wire::unix_micros_now();
-        ureq::put(&self.url)
+        ureq::put(url)
             .header("Authorization", &format!("Bearer {}", self.token))
             .header("Content-Type", "application/json")
-            .send(body.as_bytes())
-            .with_context(|| format!("PUT {}", self.url))?;
+            .send(body.to_string().as_bytes())
+            .with_context(|| format!("PUT {url}"))?;
         Ok(at)
     }
 }
@@ -224,6 +265,13 @@ fn print_report(report: &LoadReport) -> anyhow::Result<()> {
             report.bytes_per_viewer_per_edit.unwrap_or(0.0)
         );
     }
+    say!(
+        "end       {} of {} connected viewers hold the server's final version {} ({} out-of-order versions seen)",
+        report.viewers_on_final_version,
+        report.connected,
+        report.final_version,
+        report.versions_out_of_order
+    );
     if let Some(cpu) = report.load_tester_cpu_percent {
         say!("tester    {cpu:.0}% CPU (of one core) in this process");
     }
