@@ -370,15 +370,12 @@ fn decode_full(flags: u8, rest: &[u8]) -> Result<ServerMessage, DecodeError> {
     check_flags(flags, FLAG_COMPRESSED | FLAG_FINAL)?;
     let (header, used): (FullHeader, usize) = decode_header(rest)?;
     check_vertex_count(header.vertex_count)?;
-    let expected = header.vertex_count as usize * 4;
-    let payload = take_payload(&rest[used..], flags, expected)?;
-    if payload.len() != expected {
-        return Err(DecodeError::Length {
-            what: "full frame colours",
-            expected,
-            got: payload.len(),
-        });
-    }
+    let colours = one_code_a_vertex(
+        &rest[used..],
+        flags,
+        header.vertex_count,
+        "full frame colours",
+    )?;
     let info = frame_info(
         header.solution_version,
         header.sent_at_unix_micros,
@@ -386,10 +383,7 @@ fn decode_full(flags: u8, rest: &[u8]) -> Result<ServerMessage, DecodeError> {
         header.vertex_count,
         flags,
     )?;
-    Ok(ServerMessage::Full(FullFrame {
-        info,
-        colours: read_codes(&payload),
-    }))
+    Ok(ServerMessage::Full(FullFrame { info, colours }))
 }
 
 /// A delta frame: gap-encoded indices, then their codes.
@@ -436,19 +430,11 @@ fn decode_response(flags: u8, rest: &[u8]) -> Result<ServerMessage, DecodeError>
     let (header, used): (ResponseHeader, usize) = decode_header(rest)?;
     check_vertex_count(header.vertex_count)?;
     check_scale(header.scale)?;
-    let expected = header.vertex_count as usize * 4;
-    let payload = take_payload(&rest[used..], flags, expected)?;
-    if payload.len() != expected {
-        return Err(DecodeError::Length {
-            what: "response codes",
-            expected,
-            got: payload.len(),
-        });
-    }
+    let codes = one_code_a_vertex(&rest[used..], flags, header.vertex_count, "response codes")?;
     Ok(ServerMessage::Response(Response {
         response_id: header.response_id,
         scale: header.scale,
-        codes: read_codes(&payload),
+        codes,
     }))
 }
 
@@ -595,6 +581,26 @@ fn check_scale(scale: f32) -> Result<(), DecodeError> {
             "scale {scale} must be positive and at most {max_scale:e}"
         )))
     }
+}
+
+/// The `vertex_count` codes of a full frame's or a response's payload (decompressed if
+/// flagged), refused unless there are exactly that many.
+fn one_code_a_vertex(
+    payload: &[u8],
+    flags: u8,
+    vertex_count: u32,
+    what: &'static str,
+) -> Result<Vec<u32>, DecodeError> {
+    let expected = vertex_count as usize * 4;
+    let payload = take_payload(payload, flags, expected)?;
+    if payload.len() != expected {
+        return Err(DecodeError::Length {
+            what,
+            expected,
+            got: payload.len(),
+        });
+    }
+    Ok(read_codes(&payload))
 }
 
 /// Little-endian u32 codes (the caller has checked the length is a multiple of 4).
