@@ -248,6 +248,14 @@ fn push_payload(out: &mut Vec<u8>, payload: &[u8]) -> u8 {
     }
 }
 
+/// A full frame's or a response's bytes: the header, then one code a vertex (LZ4 when smaller).
+fn encode_codes(kind: u8, flags: u8, header: impl Encode, codes: &[u32]) -> Vec<u8> {
+    let mut out = encode_header(kind, flags, header);
+    let payload: Vec<u8> = codes.iter().flat_map(|c| c.to_le_bytes()).collect();
+    out[1] |= push_payload(&mut out, &payload);
+    out
+}
+
 fn encode_header(kind: u8, flags: u8, header: impl Encode) -> Vec<u8> {
     let mut out = vec![kind, flags];
     bincode::encode_into_std_write(header, &mut out, config())
@@ -271,10 +279,7 @@ impl ServerMessage {
                     scale: info.scale,
                     vertex_count: frame.colours.len() as u32,
                 };
-                let mut out = encode_header(KIND_FULL, flags_for(info), header);
-                let payload: Vec<u8> = frame.colours.iter().flat_map(|c| c.to_le_bytes()).collect();
-                out[1] |= push_payload(&mut out, &payload);
-                out
+                encode_codes(KIND_FULL, flags_for(info), header, &frame.colours)
             }
             ServerMessage::Delta(frame) => {
                 let info = &frame.info;
@@ -304,14 +309,7 @@ impl ServerMessage {
                     scale: response.scale,
                     vertex_count: response.codes.len() as u32,
                 };
-                let mut out = encode_header(KIND_RESPONSE, 0, header);
-                let payload: Vec<u8> = response
-                    .codes
-                    .iter()
-                    .flat_map(|c| c.to_le_bytes())
-                    .collect();
-                out[1] |= push_payload(&mut out, &payload);
-                out
+                encode_codes(KIND_RESPONSE, 0, header, &response.codes)
             }
             ServerMessage::Sum(sum) => {
                 let info = &sum.info;
