@@ -163,6 +163,13 @@ async fn origin_final(origin: &Origin) -> (u64, u32) {
     (state.version, state.checksum)
 }
 
+/// What `address` answers at `/api/solution`.
+async fn summary(address: SocketAddr) -> wire::summary::SolutionSummary {
+    let (status, body) = get(address, "/api/solution").await;
+    assert_eq!(status, 200);
+    serde_json::from_slice(&body).expect("a solution summary")
+}
+
 /// Polls `/healthz` until its text starts with `prefix` (the edge checks once a second).
 async fn health_becomes(address: SocketAddr, prefix: &str) -> String {
     tokio::time::timeout(PATIENCE, async {
@@ -217,11 +224,14 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
     let name = "test-same-bytes";
     let (edge_a, edge_b) = (edge(&nats, name).await, edge(&nats, name).await);
     let origin = origin(&nats, name).await;
-    let (_, checksum) = origin_final(&origin).await;
+    let (version, checksum) = origin_final(&origin).await;
     let on_edges = [
         edge_a.edge.serving(name, &origin.run).await,
         edge_b.edge.serving(name, &origin.run).await,
     ];
+    for on_edge in &on_edges {
+        final_state(on_edge, version, checksum).await;
+    }
     let servers = [origin.address, edge_a.address, edge_b.address];
     let mut viewers = Vec::new();
     for address in servers {
@@ -235,6 +245,13 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
         );
     }
     let before = checksum;
+    // Protocol 3 on an edge: the light's response once, then sums, as on the origin.
+    let mut summing = Viewer::connect_speaking(edge_a.address, 3).await;
+    let solution = summary(origin.address).await;
+    summing.wait_for(|b| b.matches(&solution)).await;
+    assert!(summing.buffer.sum.is_some(), "the edge serves the sum");
+    assert_eq!(summing.responses.len(), 1, "the Cornell box has one light");
+    let frames_before = (summing.full_frames, summing.deltas.len());
 
     // An edit sent to the edge reaches the origin, which answers as it would itself.
     let path = "/api/objects/light/emission";
@@ -265,6 +282,14 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
         r#"{"emission": [30, 20, 10]}"#,
     )
     .await;
+    let solution = summary(origin.address).await;
+    summing.wait_for(|b| b.matches(&solution)).await;
+    assert_eq!(
+        (summing.sums.len(), *summing.sums.last().unwrap()),
+        (2, 42),
+        "the emission edit reached the edge's protocol-3 viewer as one 42-byte sum"
+    );
+    assert_eq!((summing.full_frames, summing.deltas.len()), frames_before);
     // A move, sent to the origin: new geometry travels too.
     let (address, path) = (origin.address, "/api/objects/tall_block/transform");
     edit_and_wait(
@@ -286,6 +311,13 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
             "the move's geometry reached the edge"
         );
     }
+    // The move's version goes out as frames, then as a sum once the light's response is
+    // solved again.
+    let solution = summary(origin.address).await;
+    summing
+        .wait_for(|b| b.sum.is_some() && b.matches(&solution))
+        .await;
+    assert_eq!(summing.geometry_versions, [2]);
     for (viewer, address) in viewers.iter_mut().zip(servers) {
         viewer.ends_with(checksum).await;
         assert_eq!(
@@ -305,6 +337,12 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
     assert_eq!(
         (on_c.hub.current().version, on_c.hub.current().checksum),
         (version, checksum)
+    );
+    let mut late = Viewer::connect_speaking(edge_c.address, 3).await;
+    late.wait_for(|b| b.matches(&solution)).await;
+    assert!(
+        late.buffer.sum.is_some(),
+        "a late edge serves the sum from the stored responses"
     );
     assert_eq!(
         served_bytes(edge_c.address).await,
@@ -377,15 +415,18 @@ async fn edges_keep_serving_a_dead_origin_and_viewers_move_on_from_a_dead_edge()
         "{reply}"
     );
 
-    // Edge A goes away; a client given both edges goes on with B. It asks for protocol 3:
-    // edges carry frames only, which every protocol-3 viewer also takes.
+    // Edge A goes away; a client given both edges goes on with B, which serves it the
+    // origin's sum of responses (protocol 3) and the codes (protocol 2).
+    let solution = summary(edge_b.address).await;
     let urls = [edge_a.address, edge_b.address].map(|a| format!("ws://{a}/ws"));
     drop(edge_a);
-    let outcome =
-        client::session::watch_until_final_on_any(&urls, 0, wire::PROTOCOL_VERSION, PATIENCE)
+    for protocol in [wire::PROTOCOL_VERSION, wire::PLAIN_PROTOCOL_VERSION] {
+        let outcome = client::session::watch_until_final_on_any(&urls, 0, protocol, PATIENCE)
             .await
             .expect("edge B serves");
-    assert_eq!(wire::checksum(&outcome.buffer.colours), checksum);
+        assert!(outcome.buffer.matches(&solution), "protocol {protocol}");
+        assert_eq!(outcome.buffer.sum.is_some(), protocol == 3);
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -18,6 +18,8 @@ pub struct Viewer {
     pub buffer: ColourBuffer,
     /// The number of changed vertices of every delta received.
     pub deltas: Vec<usize>,
+    /// The number of full frames received.
+    pub full_frames: usize,
     /// Every geometry version announced.
     pub geometry_versions: Vec<u64>,
     /// Protocol 3: the id of every response received.
@@ -45,6 +47,7 @@ impl Viewer {
             socket,
             buffer: ColourBuffer::default(),
             deltas: Vec::new(),
+            full_frames: 0,
             geometry_versions: Vec::new(),
             responses: Vec::new(),
             sums: Vec::new(),
@@ -61,10 +64,9 @@ impl Viewer {
                     other => panic!("the viewer's connection ended: {other:?}"),
                 };
                 let message = ServerMessage::decode(&bytes).unwrap();
-                if let ServerMessage::Delta(delta) = &message {
-                    self.deltas.push(delta.indices.len());
-                }
                 match &message {
+                    ServerMessage::Delta(delta) => self.deltas.push(delta.indices.len()),
+                    ServerMessage::Full(_) => self.full_frames += 1,
                     ServerMessage::GeometryChanged { geometry_version } => {
                         self.geometry_versions.push(*geometry_version)
                     }

@@ -5,10 +5,10 @@
 use super::edge::{Edge, Served, upstream};
 use super::{
     RECORD_SUFFIX, SceneRecord, Tag, Upstream, full_object, geometry_object, header, headers,
-    record_object, texture_object,
+    record_object, responses_object, sum_object, texture_object, unpack,
 };
 use crate::Shared;
-use crate::publish::hub::{GeometryState, Hub, Published};
+use crate::publish::hub::{GeometryState, HeldResponse, Hub, Published, SumForm};
 use async_nats::jetstream::object_store;
 use bytes::Bytes;
 use futures_util::StreamExt;
@@ -25,6 +25,8 @@ struct Snapshot {
     state: Published,
     record: SceneRecord,
     record_version: u64,
+    /// The stored sum of `state`'s version, when there is one.
+    sum: Option<Bytes>,
 }
 
 /// How long reading one snapshot object may take: a read that races the object's replacement
@@ -92,13 +94,94 @@ async fn read_snapshot(
     if record.run != tag.run {
         anyhow::bail!("the record of '{scene}' is being replaced");
     }
+    // Without it, protocol-3 viewers get frames until the next sum.
+    let sum = match read_object(objects, &sum_object(scene)).await {
+        Ok((sum_tag, bytes)) if sum_tag.run == tag.run && sum_tag.version == tag.version => {
+            Some(Bytes::from(bytes))
+        }
+        _ => None,
+    };
     Ok(Snapshot {
         tag,
         geometry,
         state,
         record,
         record_version: record_tag.version,
+        sum,
     })
+}
+
+/// `state` with its sum from `encoded`, when there is one and it can be made (see
+/// [`sum_of`]).
+async fn with_sum_of(
+    objects: &object_store::ObjectStore,
+    shared: &Shared,
+    state: Published,
+    encoded: Option<Bytes>,
+) -> Published {
+    let Some(encoded) = encoded else {
+        return state;
+    };
+    match sum_of(objects, shared, &state, encoded).await {
+        Some(sum) => state.with_sum(sum),
+        None => state,
+    }
+}
+
+/// The responses the newest sum of `scene` names, as stored by origin run `run`.
+async fn read_responses(
+    objects: &object_store::ObjectStore,
+    scene: &str,
+    run: &str,
+) -> anyhow::Result<Vec<HeldResponse>> {
+    let (tag, packed) = read_object(objects, &responses_object(scene)).await?;
+    if tag.run != run {
+        anyhow::bail!("the responses of '{scene}' are of another run");
+    }
+    let messages = unpack(&packed).ok_or_else(|| anyhow::anyhow!("cut short"))?;
+    messages
+        .into_iter()
+        .map(|message| match ServerMessage::decode(message)? {
+            ServerMessage::Response(response) => Ok(HeldResponse {
+                response,
+                message: Bytes::copy_from_slice(message),
+            }),
+            _ => anyhow::bail!("not a response"),
+        })
+        .collect()
+}
+
+/// `state`'s sum from `encoded`, an origin's sum frame of it, with the stored responses read
+/// when `shared`'s hub lacks one; `None`, logged, when it cannot be made (the version then
+/// travels as frames to every viewer).
+async fn sum_of(
+    objects: &object_store::ObjectStore,
+    shared: &Shared,
+    state: &Published,
+    encoded: Bytes,
+) -> Option<Arc<SumForm>> {
+    let hub = &shared.hub;
+    let lacking = match hub.sum_for(state, encoded.clone()) {
+        Ok(sum) => return Some(sum),
+        Err(why) => why,
+    };
+    let link = upstream(shared);
+    let made = match read_responses(objects, &link.scene, &link.run).await {
+        Ok(responses) => {
+            responses.into_iter().for_each(|r| hub.hold_response(r));
+            hub.sum_for(state, encoded)
+                .map_err(|why| anyhow::anyhow!(why))
+        }
+        Err(error) => Err(error),
+    };
+    made.inspect_err(|error| {
+        tracing::debug!(
+            scene = link.scene,
+            version = state.version,
+            "edge: frames only ({lacking}; then {error:#})"
+        )
+    })
+    .ok()
 }
 
 /// Follows NATS until shutdown: scene records (new scenes, summaries, health), frames,
@@ -154,6 +237,7 @@ pub async fn follow(edge: Arc<Edge>) {
                 },
                 Some(message) = messages.next() => match message.subject.rsplit('.').next() {
                     Some("frame") => edge.take_frame(&objects, message).await,
+                    Some("sum") => edge.take_sum(&objects, message).await,
                     Some("record") => edge.take_record_message(&message),
                     Some("alive") => edge.heard(&message),
                     _ => {}
@@ -268,9 +352,16 @@ impl Edge {
             record_version: 0.into(),
             stale: false.into(),
             sum_checksum: None.into(),
+            pending_sum: None.into(),
         };
         let hub = Hub::restore(snapshot.geometry, snapshot.state);
         let shared = Shared::in_process(self.process.clone(), hub, String::new(), Some(upstream));
+        if let Some(encoded) = snapshot.sum {
+            let state = shared.hub.current();
+            if let Some(sum) = sum_of(objects, &shared, &state, encoded).await {
+                shared.hub.install(state.with_sum(sum));
+            }
+        }
         // Before anyone can ask: /api/solution must not answer without the report.
         take_record(&shared, scene, snapshot.record, snapshot.record_version);
         let served = Arc::new(Served {
@@ -345,9 +436,45 @@ impl Edge {
             // Too big for a message, or a gap: the snapshot has it.
             _ => None,
         };
+        let pending_sum = link.pending_sum.lock().expect("sum lock").take();
         match next {
-            Some(state) if state.version == version => shared.hub.install(state),
+            Some(state) if state.version == version => {
+                let sum = pending_sum.filter(|(v, _)| *v == version).map(|(_, s)| s);
+                let state = with_sum_of(objects, &shared, state, sum).await;
+                shared.hub.install(state)
+            }
             _ => self.resync(objects, &link.scene, &shared, version).await,
+        }
+    }
+
+    /// A response, held for sums; or a sum, kept for its frame (which follows it) or given to
+    /// the version served now when it is of that one (its responses were solved after it).
+    async fn take_sum(&self, objects: &object_store::ObjectStore, message: async_nats::Message) {
+        let Some(shared) = scene_of(&message.subject).and_then(|s| self.scene(s)) else {
+            return;
+        };
+        let link = upstream(&shared);
+        let version = header::<u64>(&message, headers::VERSION);
+        let run = header::<String>(&message, headers::RUN);
+        let (Some(version), true) = (version, run.as_deref() == Some(link.run.as_str())) else {
+            return;
+        };
+        let current = shared.hub.current();
+        match ServerMessage::decode(&message.payload) {
+            Ok(ServerMessage::Response(response)) => shared.hub.hold_response(HeldResponse {
+                response,
+                message: message.payload,
+            }),
+            Ok(ServerMessage::Sum(_)) if version == current.version => {
+                if let Some(sum) = sum_of(objects, &shared, &current, message.payload).await {
+                    shared.hub.install(current.with_sum(sum));
+                }
+            }
+            Ok(ServerMessage::Sum(_)) if version > current.version => {
+                *link.pending_sum.lock().expect("sum lock") = Some((version, message.payload));
+            }
+            Ok(_) => {}
+            Err(error) => tracing::warn!("edge: a sum of '{}' is unreadable: {error}", link.scene),
         }
     }
 
@@ -415,8 +542,13 @@ impl Edge {
                 if snapshot.state.version < at_least {
                     link.stale.store(true, Ordering::Relaxed);
                 }
-                if snapshot.state.version > shared.hub.current().version {
-                    shared.hub.install(snapshot.state);
+                let held = shared.hub.current();
+                let gains_sum = snapshot.state.version == held.version
+                    && held.sum.is_none()
+                    && snapshot.sum.is_some();
+                if snapshot.state.version > held.version || gains_sum {
+                    let state = with_sum_of(objects, shared, snapshot.state, snapshot.sum).await;
+                    shared.hub.install(state);
                 }
                 take_record(shared, name, snapshot.record, snapshot.record_version);
             }

@@ -14,6 +14,10 @@
 //!   `S.record`, the [`SceneRecord`] (report, emissions, health), by which edges discover
 //!   scenes (they watch the bucket). One object store, not a key-value bucket too: async-nats
 //!   0.51 cannot create a bucket on nats-server 2.9 (it misreads the account info).
+//! - `radcast.S.sum` (core NATS): for protocol-3 viewers, each light's response once a run
+//!   (when it fits one message), then each version's sum frame after its frame, with the same
+//!   headers. Objects `S.responses` (the responses the newest sum names, stored before any is
+//!   announced) and `S.sum` (that sum) serve edges that start late or miss one.
 //! - `radcast.S.record` (core NATS): the record again, sent before the frame it goes with,
 //!   so an edge that shows a final frame already has its report (as the origin does).
 //! - `radcast.S.alive` (core NATS): the origin's heartbeat, every [`ALIVE_INTERVAL`].
@@ -74,6 +78,11 @@ pub fn frame_subject(scene: &str) -> String {
     format!("radcast.{scene}.frame")
 }
 
+/// The subject a scene's responses and sums are published on.
+pub fn sum_subject(scene: &str) -> String {
+    format!("radcast.{scene}.sum")
+}
+
 /// The subject a scene's record is published on when it changes.
 pub fn record_subject(scene: &str) -> String {
     format!("radcast.{scene}.record")
@@ -102,6 +111,38 @@ pub fn texture_object(scene: &str, index: usize) -> String {
 /// The object holding a scene's newest encoded full frame.
 pub fn full_object(scene: &str) -> String {
     format!("{scene}.full")
+}
+
+/// The object holding a scene's newest sum frame.
+pub fn sum_object(scene: &str) -> String {
+    format!("{scene}.sum")
+}
+
+/// The object holding the responses a scene's newest sum names, as [`pack`] joins them.
+pub fn responses_object(scene: &str) -> String {
+    format!("{scene}.responses")
+}
+
+/// Messages joined into one object: each one's length (u32, little-endian), then its bytes.
+pub fn pack<'a>(messages: impl IntoIterator<Item = &'a [u8]>) -> Vec<u8> {
+    let mut packed = Vec::new();
+    for message in messages {
+        packed.extend_from_slice(&(message.len() as u32).to_le_bytes());
+        packed.extend_from_slice(message);
+    }
+    packed
+}
+
+/// The messages [`pack`] joined; `None` when `packed` is cut short.
+pub fn unpack(mut packed: &[u8]) -> Option<Vec<&[u8]>> {
+    let mut messages = Vec::new();
+    while !packed.is_empty() {
+        let (length, rest) = packed.split_first_chunk::<4>()?;
+        let length = u32::from_le_bytes(*length) as usize;
+        messages.push(rest.get(..length)?);
+        packed = &rest[length..];
+    }
+    Some(messages)
 }
 
 /// Suffix of the object holding a scene's [`SceneRecord`].
@@ -278,6 +319,8 @@ pub struct Upstream {
     pub stale: std::sync::atomic::AtomicBool,
     /// The origin's sum checksum and its version, from the record in use.
     pub sum_checksum: std::sync::Mutex<Option<(u64, u32)>>,
+    /// A sum that came ahead of its frame, and its version.
+    pub pending_sum: std::sync::Mutex<Option<(u64, bytes::Bytes)>>,
 }
 
 impl Upstream {
@@ -346,6 +389,21 @@ mod tests {
         assert!(check_scene_name("cornell-box").is_ok());
         for bad in ["", "a.b", "a*", "a>", "a b", &"x".repeat(65)] {
             assert!(check_scene_name(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn packed_messages_come_back_and_a_cut_pack_is_refused() {
+        let messages: [&[u8]; 3] = [b"response one", b"", b"two"];
+        let packed = pack(messages);
+        assert_eq!(unpack(&packed), Some(messages.to_vec()));
+        assert_eq!(unpack(&[]), Some(vec![]));
+        for cut in 1..packed.len() {
+            let unpacked = unpack(&packed[..cut]);
+            assert!(
+                unpacked.is_none() || cut == 16 || cut == 20,
+                "{cut}: {unpacked:?}"
+            );
         }
     }
 

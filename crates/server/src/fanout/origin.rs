@@ -4,16 +4,18 @@
 
 use super::{
     Nats, SceneRecord, Tag, alive_subject, control_subject, frame_subject, full_object,
-    geometry_object, header, headers, record_object, record_subject, texture_object,
+    geometry_object, header, headers, pack, record_object, record_subject, responses_object,
+    sum_object, sum_subject, texture_object,
 };
 use crate::Shared;
 use crate::control::{Field, Reply};
 use crate::health::Fault;
-use crate::publish::hub::Published;
+use crate::publish::hub::{GeometryState, Hub, Published, SumForm};
 use async_nats::jetstream::object_store;
 use axum::http::StatusCode;
 use bytes::Bytes;
 use futures_util::StreamExt;
+use std::collections::BTreeSet;
 use std::sync::Arc;
 
 /// What NATS holds of this origin's scene, as far as it knows.
@@ -21,6 +23,10 @@ struct Sent {
     version: u64,
     geometry_version: u64,
     record: SceneRecord,
+    /// The version whose sum was sent last.
+    sum_version: Option<u64>,
+    /// The responses sent this run.
+    responses: BTreeSet<u32>,
 }
 
 /// Publishes `shared`'s scene as `scene` on `nats` and answers its control requests, until
@@ -91,48 +97,43 @@ async fn publish_newest(
         geometry_version: geometry.version,
     };
     let held = sent.as_ref().map(|s| (s.version, s.geometry_version));
-    if held.is_none() {
-        // Textures never change within a run: stored once, before any geometry naming them.
-        for (index, png) in geometry.textures.iter().enumerate() {
-            put(
-                objects,
-                &texture_object(scene, index),
-                tag(geometry.version),
-                png,
-            )
-            .await?;
-        }
-    }
     if held.map(|(_, g)| g) != Some(geometry.version) {
-        put(
+        store_geometry(
             objects,
-            &geometry_object(scene),
+            scene,
+            &geometry,
+            held.is_none(),
             tag(geometry.version),
-            &geometry.encoded,
         )
         .await?;
     }
-    let record = SceneRecord {
-        run: run.to_string(),
-        report: shared.report.lock().expect("report lock").clone(),
-        emissions: shared.emissions.lock().expect("emissions lock").clone(),
-        health: shared.health.text(),
-        sum_checksum: current
-            .sum
-            .as_ref()
-            .map(|sum| (current.version, sum.checksum)),
-    };
+    let record = record_of(shared, run, &current);
     let record_json = match sent.as_ref().map(|s| &s.record) != Some(&record) {
-        true => Some(serde_json::to_vec(&record)?),
+        true => Some(announce_record(nats, scene, &record, current.version).await?),
         false => None,
     };
-    if let Some(json) = &record_json {
-        // Before the frame, on the same connection: edges get the two in this order.
-        let mut record_headers = async_nats::HeaderMap::new();
-        record_headers.insert(headers::VERSION, current.version.to_string());
-        nats.client
-            .publish_with_headers(record_subject(scene), record_headers, json.clone().into())
-            .await?;
+    let (mut sum_version, mut responses) = sent
+        .as_ref()
+        .map(|s| (s.sum_version, s.responses.clone()))
+        .unwrap_or_default();
+    let sum = current
+        .sum
+        .as_ref()
+        .filter(|_| sum_version != Some(current.version));
+    if let Some(sum) = sum {
+        // Ahead of its frame, so an edge installs the two at once.
+        let sum_tag = tag(current.version);
+        publish_sum(
+            nats,
+            objects,
+            scene,
+            &shared.hub,
+            sum,
+            &mut responses,
+            sum_tag,
+        )
+        .await?;
+        sum_version = Some(current.version);
     }
     let held_version = held.map(|(v, _)| v);
     if held_version != Some(current.version) {
@@ -146,6 +147,15 @@ async fn publish_newest(
         )
         .await?;
     }
+    if let Some(sum) = sum {
+        put(
+            objects,
+            &sum_object(scene),
+            tag(current.version),
+            &sum.frame,
+        )
+        .await?;
+    }
     if let Some(json) = &record_json {
         put(objects, &record_object(scene), tag(current.version), json).await?;
     }
@@ -153,8 +163,115 @@ async fn publish_newest(
         version: current.version,
         geometry_version: geometry.version,
         record,
+        sum_version,
+        responses,
     });
     Ok(())
+}
+
+/// Stores `geometry` as the scene's geometry snapshot, with its textures first when
+/// `with_textures` (the first time in a run: they never change within one).
+async fn store_geometry(
+    objects: &object_store::ObjectStore,
+    scene: &str,
+    geometry: &GeometryState,
+    with_textures: bool,
+    tag: Tag,
+) -> anyhow::Result<()> {
+    if with_textures {
+        for (index, png) in geometry.textures.iter().enumerate() {
+            put(objects, &texture_object(scene, index), tag.clone(), png).await?;
+        }
+    }
+    put(objects, &geometry_object(scene), tag, &geometry.encoded).await
+}
+
+/// Publishes `record`, sent with solution `version`, and gives back its JSON to store. Sent
+/// before the frame, on the same connection: edges get the two in this order.
+async fn announce_record(
+    nats: &Nats,
+    scene: &str,
+    record: &SceneRecord,
+    version: u64,
+) -> anyhow::Result<Vec<u8>> {
+    let json = serde_json::to_vec(record)?;
+    let mut record_headers = async_nats::HeaderMap::new();
+    record_headers.insert(headers::VERSION, version.to_string());
+    nats.client
+        .publish_with_headers(record_subject(scene), record_headers, json.clone().into())
+        .await?;
+    Ok(json)
+}
+
+/// What `/api/solution`, `/api/objects` and `/healthz` answer now, as edges are told it.
+fn record_of(shared: &Shared, run: &str, current: &Published) -> SceneRecord {
+    SceneRecord {
+        run: run.to_string(),
+        report: shared.report.lock().expect("report lock").clone(),
+        emissions: shared.emissions.lock().expect("emissions lock").clone(),
+        health: shared.health.text(),
+        sum_checksum: current
+            .sum
+            .as_ref()
+            .map(|sum| (current.version, sum.checksum)),
+    }
+}
+
+/// Publishes the responses `sum` names that were not sent this run (`sent`; each one stored
+/// first with the others it names, in case it is too big for a message or an edge misses it),
+/// then the sum frame itself, on the sum subject with `tag`'s headers. A sum naming a
+/// response the hub just replaced is not sent: the next version will be.
+async fn publish_sum(
+    nats: &Nats,
+    objects: &object_store::ObjectStore,
+    scene: &str,
+    hub: &Hub,
+    sum: &SumForm,
+    sent: &mut BTreeSet<u32>,
+    tag: Tag,
+) -> anyhow::Result<()> {
+    let Some(held) = sum
+        .response_ids
+        .iter()
+        .map(|id| hub.response(*id))
+        .collect::<Option<Vec<_>>>()
+    else {
+        return Ok(());
+    };
+    let subject = sum_subject(scene);
+    let sum_headers = message_headers(&tag);
+    if held.iter().any(|r| !sent.contains(&r.response.response_id)) {
+        let packed = pack(held.iter().map(|r| &r.message[..]));
+        put(objects, &responses_object(scene), tag, &packed).await?;
+        for response in held
+            .iter()
+            .filter(|r| !sent.contains(&r.response.response_id))
+        {
+            if response.message.len() <= nats.client.server_info().max_payload {
+                nats.client
+                    .publish_with_headers(
+                        subject.clone(),
+                        sum_headers.clone(),
+                        response.message.clone(),
+                    )
+                    .await?;
+            }
+        }
+        *sent = held.iter().map(|r| r.response.response_id).collect();
+    }
+    nats.client
+        .publish_with_headers(subject, sum_headers, sum.frame.clone())
+        .await?;
+    Ok(())
+}
+
+/// The headers naming `tag`'s version, geometry version and run on a frame or sum message.
+fn message_headers(tag: &Tag) -> async_nats::HeaderMap {
+    let mut message_headers = async_nats::HeaderMap::new();
+    message_headers.insert(headers::VERSION, tag.version.to_string());
+    message_headers.insert(headers::GEOMETRY, tag.geometry_version.to_string());
+    message_headers.insert(headers::RUN, tag.run.as_str());
+    message_headers
 }
 
 /// Publishes `current`'s frame (its delta when NATS holds its base, `held_version`) and stores
@@ -171,10 +288,7 @@ async fn publish_frame(
         Some((base, delta)) if held_version == Some(*base) => delta.clone(),
         _ => current.full.clone(),
     };
-    let mut frame_headers = async_nats::HeaderMap::new();
-    frame_headers.insert(headers::VERSION, current.version.to_string());
-    frame_headers.insert(headers::GEOMETRY, full_tag.geometry_version.to_string());
-    frame_headers.insert(headers::RUN, full_tag.run.as_str());
+    let frame_headers = message_headers(&full_tag);
     let subject = frame_subject(scene);
     let full_name = full_object(scene);
     let full = |objects| put(objects, &full_name, full_tag, &current.full);

@@ -79,7 +79,7 @@ impl Published {
     }
 
     /// The same version with `sum` (a response set it can now be made from).
-    fn with_sum(&self, sum: Arc<SumForm>) -> Published {
+    pub fn with_sum(&self, sum: Arc<SumForm>) -> Published {
         Published {
             colours: self.colours.clone(),
             full: self.full.clone(),
@@ -332,11 +332,6 @@ impl Hub {
         radiosity: &[[f32; 3]],
         terms: Vec<Term>,
     ) -> Option<Arc<SumForm>> {
-        let held = self.responses.read().expect("responses lock");
-        let responses: Vec<&HeldResponse> = terms
-            .iter()
-            .map(|t| held.get(&t.response_id).map(|r| r.as_ref()))
-            .collect::<Option<_>>()?;
         let frame = SumFrame {
             info: FrameInfo {
                 solution_version: version,
@@ -347,8 +342,7 @@ impl Hub {
             },
             terms,
         };
-        let mut viewers = wire::responses::Responses::default();
-        responses.iter().for_each(|r| viewers.insert(&r.response));
+        let viewers = self.responses_of(&frame.terms)?;
         let shown = viewers.evaluate(&frame).ok()?;
         let bound = viewers
             .quantisation_bound(&frame.terms, frame.info.vertex_count)
@@ -367,10 +361,61 @@ impl Hub {
         }))
     }
 
+    /// The held responses `terms` name, as a viewer holds them; `None` when one is missing.
+    fn responses_of(&self, terms: &[Term]) -> Option<wire::responses::Responses> {
+        let held = self.responses.read().expect("responses lock");
+        let mut viewers = wire::responses::Responses::default();
+        for term in terms {
+            viewers.insert(&held.get(&term.response_id)?.response);
+        }
+        Some(viewers)
+    }
+
+    /// `state`'s sum from `encoded` (an origin's [`ServerMessage::Sum`], served as it came)
+    /// when it is of that version and the hub holds every response it names; says why not
+    /// otherwise. Responses older than those it names are forgotten: ids only grow within a
+    /// run, so no later sum names them.
+    pub fn sum_for(&self, state: &Published, encoded: Bytes) -> Result<Arc<SumForm>, String> {
+        let Ok(ServerMessage::Sum(frame)) = ServerMessage::decode(&encoded) else {
+            return Err("not a sum frame".into());
+        };
+        if frame.info.solution_version != state.version
+            || frame.info.vertex_count as usize != state.colours.len()
+        {
+            return Err(format!(
+                "the sum is of version {} ({} vertices), not of version {} ({} vertices)",
+                frame.info.solution_version,
+                frame.info.vertex_count,
+                state.version,
+                state.colours.len()
+            ));
+        }
+        let viewers = self
+            .responses_of(&frame.terms)
+            .ok_or("it names a response this hub does not hold")?;
+        if let Some(oldest) = frame.terms.iter().map(|t| t.response_id).min() {
+            self.responses
+                .write()
+                .expect("responses lock")
+                .retain(|id, _| *id >= oldest);
+        }
+        let shown = viewers.evaluate(&frame).map_err(|e| e.to_string())?;
+        Ok(Arc::new(SumForm {
+            response_ids: frame.terms.iter().map(|t| t.response_id).collect(),
+            checksum: wire::responses::sum_checksum(&shown),
+            frame: encoded,
+        }))
+    }
+
     /// Holds `response` for sums from now on (its id new to this hub).
     pub fn add_response(&self, response: Response) {
         let message = Bytes::from(ServerMessage::Response(response.clone()).encode());
-        let held = Arc::new(HeldResponse { response, message });
+        self.hold_response(HeldResponse { response, message });
+    }
+
+    /// Holds `held` (an origin's response as it was sent) for sums from now on.
+    pub fn hold_response(&self, held: HeldResponse) {
+        let held = Arc::new(held);
         self.responses
             .write()
             .expect("responses lock")
@@ -496,6 +541,57 @@ mod tests {
         // Within RGB9E5's 9-bit mantissa (EXT_texture_shared_exponent).
         let decoded = wire::decode_colour(bright.colours[0], bright.scale)[0];
         assert!((decoded / 1e6 - 1.0).abs() <= 2f32.powi(-9), "{decoded}");
+    }
+
+    #[test]
+    fn an_edge_takes_an_origins_sum_only_of_its_version_and_with_every_response() {
+        let values = [[2.0, 1.0, 0.5], [0.25; 3]];
+        let origin = Hub::new(1, &geometry(2), Arc::from([]), &values);
+        let edge = Hub::new(1, &geometry(2), Arc::from([]), &values);
+        let older = Response::quantise(3, &[[9.0; 3]; 2]);
+        let response = Response::quantise(7, &values);
+        origin.add_response(response.clone());
+        let terms = vec![Term {
+            response_id: 7,
+            weight: [1.0; 3],
+        }];
+        origin.publish_with_sum(&values, true, Some(terms));
+        let published = origin.current();
+        let sum = published.sum.clone().expect("the sum is within its bound");
+        let state = Published::new(
+            FrameInfo {
+                solution_version: published.version,
+                sent_at_unix_micros: 0,
+                scale: published.scale,
+                vertex_count: 2,
+                is_final: true,
+            },
+            published.colours.to_vec(),
+            None,
+            1,
+        );
+        edge.add_response(older);
+        assert_eq!(
+            edge.sum_for(&state, sum.frame.clone()).unwrap_err(),
+            "it names a response this hub does not hold"
+        );
+        edge.add_response(response);
+        let taken = edge.sum_for(&state, sum.frame.clone()).unwrap();
+        assert_eq!(
+            (&taken.response_ids, taken.checksum, &taken.frame),
+            (&sum.response_ids, sum.checksum, &sum.frame),
+            "the origin's sum, as the origin evaluates it"
+        );
+        assert!(edge.response(3).is_none(), "older than any sum to come");
+        let first = edge.current();
+        assert!(
+            edge.sum_for(&first, sum.frame.clone()).is_err(),
+            "another version"
+        );
+        assert!(
+            edge.sum_for(&state, published.full.clone()).is_err(),
+            "not a sum"
+        );
     }
 
     #[test]
