@@ -3,7 +3,12 @@
 //! The occluders are the scene's input faces (not the patches), in obvhs's compressed wide BVH,
 //! chosen by measurement (docs/BENCHMARKS.md). Coordinates are re-centred on the scene and scaled
 //! by a power of two about its size before the conversion to f32, so a scene far from the
-//! origin keeps its precision and one of any size meets the same arithmetic.
+//! origin keeps its precision and one of any size meets the same arithmetic. Built with the
+//! `embree` feature, Intel Embree 3 ([`embree`]) is the index instead.
+
+#[cfg(feature = "embree")]
+#[allow(unsafe_code)]
+mod embree;
 
 use crate::mesh::Patch;
 use crate::sampling::{cosine_direction, splitmix64, stratified_uv};
@@ -65,12 +70,40 @@ pub enum RayBackend {
     Bvh2,
     /// Every face tested against every segment.
     Linear,
+    /// Intel Embree 3 (the default with the `embree` feature).
+    #[cfg(feature = "embree")]
+    Embree,
+}
+
+impl RayBackend {
+    /// The fastest one built in: Embree with the `embree` feature, else obvhs's CWBVH.
+    #[cfg(feature = "embree")]
+    pub const DEFAULT: RayBackend = RayBackend::Embree;
+    /// The fastest one built in: Embree with the `embree` feature, else obvhs's CWBVH.
+    #[cfg(not(feature = "embree"))]
+    pub const DEFAULT: RayBackend = RayBackend::CwBvh;
+
+    /// Every backend built in.
+    pub fn all() -> Vec<RayBackend> {
+        [
+            RayBackend::CwBvh,
+            RayBackend::Bvh2,
+            RayBackend::Linear,
+            #[cfg(feature = "embree")]
+            RayBackend::Embree,
+        ]
+        .to_vec()
+    }
 }
 
 enum Index {
     CwBvh(CwBvh),
     Bvh2(Bvh2),
     Linear,
+    /// The Embree scene, and each scene face's place among the indexed ones (its primitive id
+    /// there; `u32::MAX` for a face not indexed).
+    #[cfg(feature = "embree")]
+    Embree(embree::Scene, Vec<u32>),
 }
 
 /// Where the occluders live in f32: relative to the scene's centre, in units of a power of two
@@ -132,7 +165,7 @@ const DIRECTION_STRIDE: u32 = 37;
 impl Occluders {
     /// Builds the default index over every face of `scene`.
     pub fn new(scene: &Scene) -> Self {
-        Self::with_backend(scene, RayBackend::CwBvh)
+        Self::with_backend(scene, RayBackend::DEFAULT)
     }
 
     /// Builds the given kind of index over every face of `scene`.
@@ -183,6 +216,21 @@ impl Occluders {
             }
             RayBackend::Bvh2 => Index::Bvh2(build_bvh2(&boxes, params, &mut Duration::default())),
             RayBackend::Linear => Index::Linear,
+            #[cfg(feature = "embree")]
+            RayBackend::Embree => {
+                let quads: Vec<_> = indexed
+                    .iter()
+                    .map(|&f| (faces[f as usize].corners, faces[f as usize].arity))
+                    .collect();
+                let mut places = vec![u32::MAX; faces.len()];
+                for (place, &f) in indexed.iter().enumerate() {
+                    places[f as usize] = place as u32;
+                }
+                match embree::Scene::new(&quads) {
+                    Some(scene) => Index::Embree(scene, places),
+                    None => Index::CwBvh(build_cwbvh(&boxes, params, &mut Duration::default())),
+                }
+            }
         };
         Occluders {
             index,
@@ -242,6 +290,14 @@ impl Occluders {
                 .indexed
                 .iter()
                 .for_each(|&face| consider(face, hit(&ray, face))),
+            #[cfg(feature = "embree")]
+            Index::Embree(scene, places) => {
+                let own = places.get(ignore as usize).copied().unwrap_or(u32::MAX);
+                if let Some((place, t)) = scene.first_hit(ray.origin, ray.direction, ray.tmin, own)
+                {
+                    consider(self.indexed[place as usize], t);
+                }
+            }
         }
         (best_face != u32::MAX).then(|| Hit {
             face: best_face,
@@ -324,6 +380,16 @@ impl Occluders {
                 .indexed
                 .iter()
                 .all(|&face| hit(&ray, face) == f32::INFINITY),
+            #[cfg(feature = "embree")]
+            Index::Embree(scene, places) => {
+                let place = |f: u32| places.get(f as usize).copied().unwrap_or(u32::MAX);
+                scene.is_clear(
+                    ray.origin,
+                    ray.direction,
+                    (ray.tmin, ray.tmax),
+                    ignore.map(place),
+                )
+            }
         }
     }
 }
@@ -360,13 +426,75 @@ mod tests {
         }
         let far = scene.add_object("far");
         scene.add_polygon(far, &square(0.0, 1e30), material);
-        for backend in [RayBackend::CwBvh, RayBackend::Bvh2, RayBackend::Linear] {
+        for backend in RayBackend::all() {
             let occluders = Occluders::with_backend(&scene, backend);
             let (a, b) = (dvec3(1e29, 1e29, -1.0), dvec3(1e29, 1e29, 1.0));
             assert!(
                 occluders.segment_is_clear(a, b, [u32::MAX, u32::MAX]),
                 "{backend:?}"
             );
+        }
+    }
+
+    #[test]
+    fn no_segment_leaves_a_box_tiled_with_triangles_and_quads_through_a_seam() {
+        // Each side of a 2 m cube is 7 x 7 tiles, every other tile two triangles: segments
+        // from inside to far outside, many through a seam or a tile corner, must all be blocked,
+        // by every backend; segments between inside points all clear.
+        let mut scene = Scene::default();
+        let walls = scene.add_object("walls");
+        let material = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        let n = 7;
+        for axis in 0..3 {
+            for side in [-1.0, 1.0] {
+                for (i, j) in (0..n).flat_map(|i| (0..n).map(move |j| (i, j))) {
+                    let at = |a: usize, b: usize| {
+                        let (u, v) = (
+                            -1.0 + 2.0 * a as f64 / n as f64,
+                            -1.0 + 2.0 * b as f64 / n as f64,
+                        );
+                        let mut p = [0.0; 3];
+                        p[axis] = side;
+                        p[(axis + 1) % 3] = u;
+                        p[(axis + 2) % 3] = v;
+                        DVec3::from(p)
+                    };
+                    let quad = [at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)];
+                    match (i + j) % 2 {
+                        0 => scene.add_polygon(walls, &quad, material),
+                        _ => {
+                            scene.add_polygon(walls, &[quad[0], quad[1], quad[2]], material);
+                            scene.add_polygon(walls, &[quad[0], quad[2], quad[3]], material);
+                        }
+                    }
+                }
+            }
+        }
+        for backend in RayBackend::all() {
+            let occluders = Occluders::with_backend(&scene, backend);
+            let mut leaks = 0;
+            for k in 0..20_000u64 {
+                let (u, v) = stratified_uv(k as u32, 7);
+                let (s, t) = stratified_uv(k as u32, 11);
+                let inside = dvec3(u - 0.5, v - 0.5, s - 0.5) * 1.6;
+                // Toward a seam or corner of the tiling, or anywhere, and on past the wall.
+                let tile = |x: f64| (x * n as f64).round() / n as f64 * 2.0 - 1.0;
+                let target = match k % 3 {
+                    0 => dvec3(tile(u), tile(v), 1.0),
+                    1 => dvec3(1.0, tile(s), t * 2.0 - 1.0),
+                    _ => dvec3(u * 2.0 - 1.0, -1.0, v * 2.0 - 1.0),
+                };
+                let outside = inside + (target - inside) * 3.0;
+                if occluders.segment_is_clear(inside, outside, [u32::MAX; 2]) {
+                    leaks += 1;
+                }
+                let other = dvec3(t - 0.5, s - 0.5, u - 0.5) * 1.6;
+                assert!(occluders.segment_is_clear(inside, other, [u32::MAX; 2]));
+            }
+            assert_eq!(leaks, 0, "{backend:?}");
         }
     }
 
@@ -388,7 +516,7 @@ mod tests {
             ],
             material,
         );
-        for backend in [RayBackend::CwBvh, RayBackend::Bvh2, RayBackend::Linear] {
+        for backend in RayBackend::all() {
             let occluders = Occluders::with_backend(&scene, backend);
             let (a, b) = (dvec3(0.0, 0.0, -1.0), dvec3(0.0, 0.0, 1.0));
             assert!(!occluders.segment_is_clear(a, b, [u32::MAX, u32::MAX]));
