@@ -419,6 +419,14 @@ mod tests {
     use crate::scene::{Material, Rgb};
     use glam::dvec3;
 
+    /// A grey material for occluders (their reflectance does not matter to rays).
+    fn grey() -> Material {
+        Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        }
+    }
+
     #[test]
     fn faces_that_collapse_to_a_point_in_f32_block_nothing() {
         // Sixty-four unit squares at the origin and one 1e30 away: in the occluders' f32
@@ -427,10 +435,7 @@ mod tests {
         // nested the BVH past its traversal stack (obvhs's checks panicked: an object moved
         // 9e29 away in the Cornell box, once contact lines had cut its floor into pieces).
         let mut scene = Scene::default();
-        let material = Material {
-            reflectance: Rgb::splat(0.5),
-            emission: Rgb::ZERO,
-        };
+        let material = grey();
         let square = |z: f64, x: f64| {
             [
                 dvec3(x, 0.0, z),
@@ -462,10 +467,7 @@ mod tests {
         // by every backend; segments between inside points all clear.
         let mut scene = Scene::default();
         let walls = scene.add_object("walls");
-        let material = Material {
-            reflectance: Rgb::splat(0.5),
-            emission: Rgb::ZERO,
-        };
+        let material = grey();
         let n = 7;
         for axis in 0..3 {
             for side in [-1.0, 1.0] {
@@ -523,10 +525,7 @@ mod tests {
         // every node within 1e-4 of the ray parameter (2.56 cm here) and found nothing, and a
         // 60 m segment from that point crosses the square at 8e-5 of its length.
         let mut scene = Scene::default();
-        let material = Material {
-            reflectance: Rgb::splat(0.5),
-            emission: Rgb::ZERO,
-        };
+        let material = grey();
         let floor = scene.add_object("floor");
         scene.add_polygon(
             floor,
@@ -572,10 +571,7 @@ mod tests {
     fn a_wall_between_two_points_blocks_and_its_own_faces_do_not() {
         let mut scene = Scene::default();
         let wall = scene.add_object("wall");
-        let material = Material {
-            reflectance: Rgb::splat(0.5),
-            emission: Rgb::ZERO,
-        };
+        let material = grey();
         scene.add_polygon(
             wall,
             &[
