@@ -101,6 +101,31 @@ pub(crate) fn room_with_a_box() -> Scene {
     scene
 }
 
+/// A unit square floor (facing up) under a unit square lamp 10 m above it, cut through by a
+/// closed box 10 cm tall above the floor and 50 cm below it, wider than the floor: the floor
+/// beyond `x = edge` lies inside the box, where no light reaches.
+pub(crate) fn floor_cut_by_a_box(edge: f64) -> Scene {
+    let mut scene = Scene::default();
+    let grey = Material {
+        reflectance: Rgb::splat(0.5),
+        emission: Rgb::ZERO,
+    };
+    let lamp = Material {
+        emission: Rgb::ONE,
+        ..grey
+    };
+    let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
+    add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z, x), grey);
+    add_parallelogram(&mut scene, "lamp", (y * 10.0, x, z), lamp);
+    let (corner, size) = (dvec3(edge, -0.5, -0.5), dvec3(1.0, 0.6, 2.0));
+    let bottom = (corner, x, z);
+    for (origin, u, v) in unit_box(corner).into_iter().chain([bottom]) {
+        let sides = (corner + (origin - corner) * size, u * size, v * size);
+        add_parallelogram(&mut scene, "box", sides, grey);
+    }
+    scene
+}
+
 /// Adds an object `name` with one face: the parallelogram at `origin` spanned by `u` then `v`
 /// (its front faces along `u x v`).
 pub(crate) fn add_parallelogram(

@@ -222,7 +222,7 @@ impl Transport for Hierarchy {
         for n in 0..self.tree.nodes.len() {
             let parent = self.tree.nodes[n].parent;
             if parent != NONE {
-                down[n] = down[n] + down[parent as usize];
+                down[n] = down[n] + down[parent as usize] * self.reach.push_weight[n];
             }
         }
         for (i, o) in out.iter_mut().enumerate() {
@@ -234,7 +234,8 @@ impl Transport for Hierarchy {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hierarchy::fixtures::{build, closed_cube, room_with_a_box};
+    use crate::hierarchy::Link;
+    use crate::hierarchy::fixtures::{build, closed_cube, floor_cut_by_a_box, room_with_a_box};
     use crate::scene::Rgb;
     use crate::visibility::Occluders;
 
@@ -350,5 +351,55 @@ mod tests {
                 + slopes[wall as usize][1] * v as f64;
             assert!(read.x >= -1e-12, "at {offset:?}: {}", read.x);
         }
+    }
+
+    #[test]
+    fn what_a_floor_gathers_falls_only_where_light_reaches_and_keeps_its_total() {
+        // A box cuts through the floor's half beyond x = 0.5 (a lattice line). One link to the
+        // whole floor gathers its mean irradiance, a factor of 0.01 from a lamp sending 1: the
+        // open half receives twice that, the half inside the box nothing, the floor the same
+        // total (before, every quarter got the mean, inside the box too).
+        let scene = floor_cut_by_a_box(0.5);
+        let mut hierarchy = Hierarchy::cluster_tree(&scene);
+        let (floor, lamp) = (hierarchy.tree.face_node[0], hierarchy.tree.face_node[1]);
+        hierarchy.tree.subdivide(floor);
+        for child in hierarchy.tree.nodes[floor as usize].children() {
+            hierarchy.tree.subdivide(child);
+        }
+        hierarchy.links.push(Link {
+            receiver: floor,
+            source: lamp,
+            factor: 0.01,
+            spread: 0.0,
+            offset: [0.0; 2],
+        });
+        hierarchy.index(&Occluders::new(&scene));
+        let leaves = &hierarchy.tree.leaves;
+        let radiosity: Vec<Rgb> = leaves
+            .iter()
+            .map(|&n| {
+                let sends = hierarchy.tree.element_patch(n).face == 1;
+                Rgb::splat(if sends { 1.0 } else { 0.0 })
+            })
+            .collect();
+        let mut gathered = vec![Rgb::ZERO; leaves.len()];
+        hierarchy.gather(&radiosity, &mut gathered);
+        let mut total = 0.0;
+        for (i, &n) in leaves.iter().enumerate() {
+            let patch = hierarchy.tree.element_patch(n);
+            if patch.face != 0 {
+                continue;
+            }
+            let inside = patch.polygon.centroid().x > 0.5;
+            let expected = if inside { 0.0 } else { 0.02 };
+            assert!(
+                (gathered[i].x - expected).abs() < 1e-7,
+                "leaf at {}: {} instead of {expected}",
+                patch.polygon.centroid(),
+                gathered[i].x
+            );
+            total += gathered[i].x * patch.area;
+        }
+        assert!((total - 0.01).abs() < 1e-7, "{total}");
     }
 }

@@ -1,8 +1,10 @@
 //! Where light can reach: a leaf point is buried when every cosine ray from it meets the back
-//! of a face (under a box on the floor). Sources send their mean over the reached area, and
-//! errors are measured against the mean over it.
+//! of a face (under a box on the floor, inside a wall that cuts through it). Sources send their
+//! mean over the reached area, errors are measured against the mean over it, what an element
+//! gathers is pushed down to its reached parts only, and leaves whose points disagree straddle
+//! the edge of the reach (refinement splits them).
 
-use super::tree::Tree;
+use super::tree::{NONE, Tree};
 use crate::sampling::pair_seed;
 use crate::scene::Rgb;
 use crate::visibility::Occluders;
@@ -15,7 +17,17 @@ pub(super) struct Reach {
     pub(super) seen_share: Vec<f64>,
     /// Per node, the area of its leaves that light can reach: what a source's mean is taken over.
     pub(super) seen_area: Vec<f64>,
+    /// Per node, the factor on the irradiance its parent element gathered as it is pushed down
+    /// to it ([`Reach::push_weights`]); 1 below a cluster.
+    pub(super) push_weight: Vec<f64>,
+    /// Per node ever a leaf, whether some of its points are buried and some reached: it
+    /// straddles the edge of where light reaches.
+    pub(super) straddles: Vec<bool>,
 }
+
+/// How far toward its centroid a leaf's corner is tested for burial: where the display's
+/// corner values are read (`solution::vertices`'s `INSET`).
+const CORNER_INSET: f64 = 0.25;
 
 impl Reach {
     /// Measures the leaves of `tree` not measured yet and sums the reached area up the trees.
@@ -27,28 +39,39 @@ impl Reach {
             .copied()
             .filter(|&n| self.seen_share[n as usize].is_nan())
             .collect();
-        let shares: Vec<f64> = unmeasured
+        self.straddles.resize(tree.nodes.len(), false);
+        let measured: Vec<(f64, bool)> = unmeasured
             .par_iter()
             .map(|&n| {
                 let patch = tree.element_patch(n);
-                let mut share = 0.0;
-                let mut point = 0;
-                patch.polygon.for_each_quadrature_point(1, |x, weight| {
-                    point += 1;
-                    if !occluders.is_buried(
-                        x,
-                        patch.normal,
-                        patch.face,
-                        pair_seed(n as usize, point),
-                    ) {
+                let mut quadrature = Vec::with_capacity(4);
+                patch
+                    .polygon
+                    .for_each_quadrature_point(1, |x, weight| quadrature.push((x, weight)));
+                // Also where viewers' corner values are read (`solution::vertices`'s inset
+                // points): a corner of a sliver can lie inside a wall its quadrature points miss.
+                let centroid = patch.polygon.centroid();
+                let insets = patch
+                    .polygon
+                    .corners()
+                    .iter()
+                    .map(|&c| (c + (centroid - c) * CORNER_INSET, 0.0));
+                let (mut share, mut buried, mut points) = (0.0, 0, 0);
+                for (k, (x, weight)) in quadrature.into_iter().chain(insets).enumerate() {
+                    points += 1;
+                    let seed = pair_seed(n as usize, k + 1);
+                    if occluders.is_buried(x, patch.normal, patch.face, seed) {
+                        buried += 1;
+                    } else {
                         share += weight;
                     }
-                });
-                share
+                }
+                (share, buried > 0 && buried < points)
             })
             .collect();
-        for (n, share) in unmeasured.into_iter().zip(shares) {
+        for (n, (share, straddles)) in unmeasured.into_iter().zip(measured) {
             self.seen_share[n as usize] = share;
+            self.straddles[n as usize] = straddles;
         }
         self.seen_area = vec![0.0; tree.nodes.len()];
         for &leaf in &tree.leaves {
@@ -62,6 +85,37 @@ impl Reach {
                 .sum();
             self.seen_area[n] += reached;
         }
+        self.push_weight = self.push_weights(tree);
+    }
+
+    /// Per node, its reached share over its parent element's: a link to an element gathers
+    /// the mean irradiance over all of it, and none of it falls where light cannot reach (under
+    /// a box, inside a wall that cuts through it), so the parts light reaches receive that mean
+    /// over the reached share, and a buried part nothing. Area times weight sums to the
+    /// parent's area over its children: pushing keeps what the parent gathered.
+    fn push_weights(&self, tree: &Tree) -> Vec<f64> {
+        let share = |n: usize| {
+            let area = tree.nodes[n].area;
+            if area > 0.0 {
+                self.seen_area[n] / area
+            } else {
+                0.0
+            }
+        };
+        (0..tree.nodes.len())
+            .map(|n| {
+                let parent = tree.nodes[n].parent;
+                if parent == NONE || tree.nodes[parent as usize].element.is_none() {
+                    return 1.0;
+                }
+                let parent_share = share(parent as usize);
+                if parent_share > 0.0 {
+                    share(n) / parent_share
+                } else {
+                    0.0
+                }
+            })
+            .collect()
     }
 
     /// Mean over the reached area of the leaves of the largest channel of reflected radiosity
@@ -85,7 +139,9 @@ impl Reach {
 
 #[cfg(test)]
 mod tests {
-    use crate::hierarchy::fixtures::{build, room_with_a_box};
+    use crate::hierarchy::fixtures::{build, floor_cut_by_a_box, room_with_a_box};
+    use crate::hierarchy::refine::can_split_to;
+    use crate::hierarchy::{Hierarchy, receiving_area};
 
     #[test]
     fn a_box_on_the_floor_buries_its_footprint_and_nothing_else() {
@@ -110,5 +166,46 @@ mod tests {
                 hierarchy.reach.seen_area[node]
             );
         }
+    }
+
+    #[test]
+    fn leaves_across_a_wall_through_the_floor_split_to_the_finest_elements() {
+        // The box's side at x = 0.6 crosses no lattice line of the floor: every leaf over it
+        // is split down to the smallest element the leaf budget allows, and every other floor
+        // leaf lies wholly inside the box (no light) or wholly outside it (all of it).
+        let edge = 0.6;
+        let scene = floor_cut_by_a_box(edge);
+        let hierarchy: Hierarchy = build(&scene, 0.5);
+        let finest = super::super::refine::finest_radius(
+            receiving_area(&scene),
+            crate::hierarchy::HierarchySettings::default().max_leaves,
+        );
+        let (mut across, mut whole) = (0, 0);
+        for &leaf in &hierarchy.tree.leaves {
+            let node = &hierarchy.tree.nodes[leaf as usize];
+            let patch = hierarchy.tree.element_patch(leaf);
+            if patch.face != 0 {
+                continue;
+            }
+            let xs = patch.polygon.corners().iter().map(|c| c.x);
+            let (low, high) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+                (l.min(x), h.max(x))
+            });
+            let share = hierarchy.reach.seen_share[leaf as usize];
+            if low < edge && high > edge {
+                across += 1;
+                assert!(
+                    !can_split_to(node, finest),
+                    "a leaf over x in [{low}, {high}] of radius {} stayed whole",
+                    node.radius
+                );
+            } else {
+                whole += 1;
+                let expected = if high <= edge { 1.0 } else { 0.0 };
+                assert_eq!(share, expected, "leaf over x in [{low}, {high}]");
+            }
+        }
+        println!("{across} floor leaves across the box's side, {whole} on one side");
+        assert!(across > 0 && whole > across);
     }
 }

@@ -86,6 +86,13 @@ fn element_size(n: &Node) -> f64 {
     n.radius.min((4.0 * n.area / (3.0 * 3.0f64.sqrt())).sqrt())
 }
 
+/// Whether element `n` is above `finest_radius` ([`finest_radius`]) and may still split.
+pub(super) fn can_split_to(n: &Node, finest_radius: f64) -> bool {
+    n.element
+        .as_ref()
+        .is_some_and(|e| element_size(n) > finest_radius && e.depth < MAX_DEPTH)
+}
+
 /// The smallest element radius a leaf budget affords everywhere: that of a disc of the
 /// receiving area's share per leaf, `sqrt(A / (pi max_leaves))`. Finer elements can only be
 /// afforded in a small part of the scene, and on models of many small faces the size scale
@@ -709,6 +716,7 @@ mod tests {
     use super::*;
     use crate::hierarchy::MIN_RADIUS_PER_ERROR;
     use crate::hierarchy::fixtures::{add_parallelogram, build, screened_lamp, unit_box};
+    use crate::input::contact::split_at_contacts;
     use crate::scene::{Material, Scene};
     use glam::{DVec3, dvec3};
 
@@ -860,6 +868,13 @@ mod tests {
                 emission: Rgb::splat(10.0),
             },
         );
+        let (floor_radius, box_radius) = (
+            scene.faces[0].polygon.radius(),
+            scene.faces[1].polygon.radius(),
+        );
+        // As loaded: the floor cut along the box's footprint (else the leaves over its outline,
+        // half buried, split to the finest size the leaf budget allows).
+        split_at_contacts(&mut scene);
         let error = 0.1;
         let hierarchy = build(&scene, error);
         let floor_leaves = hierarchy
@@ -867,12 +882,12 @@ mod tests {
             .leaves
             .iter()
             .map(|&n| &hierarchy.tree.nodes[n as usize])
-            .filter(|n| n.element.as_ref().is_some_and(|e| e.patch.face == 0));
+            .filter(|n| {
+                n.element
+                    .as_ref()
+                    .is_some_and(|e| scene.faces[e.patch.face as usize].source == 0)
+            });
         let finest = floor_leaves.map(|n| n.radius).fold(f64::INFINITY, f64::min);
-        let (floor_radius, box_radius) = (
-            scene.faces[0].polygon.radius(),
-            scene.faces[1].polygon.radius(),
-        );
         println!(
             "finest floor leaf radius {finest:.4} (floor radius {floor_radius:.2}, box face {box_radius:.3})"
         );
