@@ -1,6 +1,7 @@
 //! The factor a link carries: analytic between elements (Baum et al. 1989's point-to-polygon
 //! factor at the receiver's quadrature points), with kernel-weighted shadow rays where a shaft
-//! cannot decide visibility, and sampled point pairs where a cluster takes part.
+//! cannot decide visibility, and sampled from the cluster's side, onto the receiving element,
+//! where a cluster sends.
 
 use super::Hierarchy;
 use super::shaft::{Visibility, shaft_visibility};
@@ -214,7 +215,11 @@ impl<'a> LinkFactors<'a> {
     pub(super) fn factor(&self, receiver: u32, source: u32, estimate: &Estimate) -> f64 {
         let (r, s) = (self.node(receiver), self.node(source));
         let (Some(er), Some(es)) = (&r.element, &s.element) else {
-            return self.sampled_factor(receiver, source);
+            return self.sampled_factor(
+                receiver,
+                source,
+                pair_seed(receiver as usize, source as usize),
+            );
         };
         let (p, q) = (&er.patch, &es.patch);
         if estimate.visibility == Visibility::Partial {
@@ -313,33 +318,35 @@ impl<'a> LinkFactors<'a> {
         }
     }
 
-    /// The area-average kernel `A_S E[cos cos V / (pi d^2)]` over point pairs spread by area on
-    /// both ends: an unbiased estimate of the factor between any two sets of surfaces.
-    fn sampled_factor(&self, receiver: u32, source: u32) -> f64 {
-        let seed = pair_seed(receiver as usize, source as usize);
+    /// The factor from element `receiver` to cluster `source`, visibility included, by
+    /// reciprocity from the source's side: `F_RS = (A_S / A_R) E_y[F_{y->R} V]` over points `y`
+    /// spread by area on the source's faces, `F_{y->R}` the analytic point-to-polygon factor
+    /// onto the receiver and `V` one shadow ray to a point of it (`seed` picks the sample
+    /// stream). Unbiased, and each term is bounded; the point-to-point kernel
+    /// `cos cos / (pi d^2)` sampled at both ends was not, and capped at one it ran a real
+    /// model's indirect light 25% low (the monastery's walls).
+    fn sampled_factor(&self, receiver: u32, source: u32, seed: u64) -> f64 {
+        let r = self.hierarchy.tree.element_patch(receiver);
         let (mut sum, mut cast) = (0.0, 0);
         for k in 0..CLUSTER_SAMPLES {
-            let x = self.hierarchy.tree.sample(receiver, k, seed);
             let y = self.hierarchy.tree.sample(source, k, splitmix64(seed));
-            let d = y.position - x.position;
-            if d == DVec3::ZERO {
+            let onto = point_to_polygon_form_factor(y.position, y.normal, &r.polygon, r.normal);
+            if onto == 0.0 {
                 continue;
             }
-            let kernel = facing_kernel(x.normal, y.normal, d);
-            if kernel == 0.0 {
-                continue;
-            }
+            let (u, v) = stratified_uv(k, seed);
             cast += 1;
-            if self
-                .occluders
-                .segment_is_clear(x.position, y.position, [x.face, y.face])
-            {
-                sum += kernel / PI;
+            if self.occluders.segment_is_clear(
+                r.polygon.point_at(u, v),
+                y.position,
+                [r.face, y.face],
+            ) {
+                sum += onto;
             }
         }
         // Counted once a pair: an atomic add a ray had both threads fight over its cache line.
         self.rays_cast.fetch_add(cast, Ordering::Relaxed);
-        (self.node(source).area * sum / CLUSTER_SAMPLES as f64).min(1.0)
+        (self.node(source).area / r.area * sum / CLUSTER_SAMPLES as f64).min(1.0)
     }
 }
 
@@ -471,6 +478,57 @@ mod tests {
         assert!(visibility_spread(9.99, 0.37) < 0.02);
         // Just above the floor it casts a hard shadow over 37% of it: all or nothing.
         assert!(visibility_spread(0.01, 0.37) > 0.95);
+    }
+
+    #[test]
+    fn a_cluster_a_hair_above_a_floor_sends_its_exact_factor_on_average() {
+        // A 2 x 2 floor under two 0.5 x 0.5 squares facing it 5 cm up, one cluster with it: the
+        // point-to-point kernel between them reaches 1 / (pi 0.05^2), so a 16-sample estimate
+        // of it capped at one ran far low. By reciprocity the exact factor is the squares'
+        // area over the floor's times the mean of their points' analytic factors onto it.
+        let mut scene = Scene::default();
+        let grey = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        let (x, y) = (DVec3::X, DVec3::Y);
+        add_parallelogram(&mut scene, "floor", (DVec3::ZERO, x * 2.0, y * 2.0), grey);
+        for corner in [dvec3(0.25, 0.25, 0.05), dvec3(1.25, 1.25, 0.05)] {
+            add_parallelogram(&mut scene, "square", (corner, y * 0.5, x * 0.5), grey);
+        }
+        let hierarchy = Hierarchy::cluster_tree(&scene);
+        let occluders = Occluders::new(&scene);
+        let factors = LinkFactors::new(&hierarchy, &occluders, FormFactorSettings::default());
+        let (floor, root) = (hierarchy.tree.face_node[0], 0);
+        assert!(hierarchy.tree.nodes[root as usize].element.is_none());
+        let floor_patch = hierarchy.tree.element_patch(floor);
+        let exact: f64 = hierarchy.tree.face_node[1..]
+            .iter()
+            .map(|&n| {
+                let square = hierarchy.tree.element_patch(n);
+                let mut mean = 0.0;
+                square
+                    .polygon
+                    .for_each_quadrature_point(8, |point, weight| {
+                        mean += weight
+                            * point_to_polygon_form_factor(
+                                point,
+                                square.normal,
+                                &floor_patch.polygon,
+                                floor_patch.normal,
+                            );
+                    });
+                square.area / floor_patch.area * mean
+            })
+            .sum();
+        let streams = 4096;
+        let estimates: Vec<f64> = (0..streams)
+            .map(|seed| factors.sampled_factor(floor, root, seed))
+            .collect();
+        assert!(estimates.iter().all(|f| (0.0..=1.0).contains(f)));
+        let mean = estimates.iter().sum::<f64>() / streams as f64;
+        // The mean of 4,096 estimates has a standard error of about 1.1% here.
+        assert!((mean / exact - 1.0).abs() < 0.04, "{mean} against {exact}");
     }
 
     #[test]

@@ -8,7 +8,8 @@
 //! - **Clusters** (Smits, Arvo, Greenberg 1994; Sillion 1995): a binary tree of median splits
 //!   over the input faces sits above them, so refinement starts from one self-link of the root,
 //!   not from faces^2 links: a face gathers from whole clusters while they are far enough. A
-//!   cluster link carries the sampled area-average kernel. Clusters only send: a receiving
+//!   cluster link carries a sampled factor, by reciprocity from the cluster's side (its points'
+//!   analytic factors onto the receiving element, each bounded). Clusters only send: a receiving
 //!   cluster would hand its irradiance to faces that cannot see the source.
 //! - **Refinement** (BF with visibility): a link is kept when the radiosity error it can carry,
 //!   `rho_R (B_S dF + F dB_S)`, is within the tolerance. `dF` is the spread of the factor over
