@@ -193,9 +193,11 @@ impl Hierarchy {
         }
     }
 
-    /// The leaves as a mesh: face by face, corners shared between the leaves of a face.
+    /// The leaves as a mesh: face by face, corners shared between the leaves of a face, but
+    /// not across the edge of where light reaches ([`tree::Tree::leaf_mesh`]).
     pub fn leaf_mesh(&self) -> Mesh {
-        self.tree.leaf_mesh()
+        self.tree
+            .leaf_mesh(|leaf| self.reach.seen_share[leaf as usize] == 0.0)
     }
 
     /// What refinement and solving cost so far.

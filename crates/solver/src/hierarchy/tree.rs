@@ -377,11 +377,15 @@ impl Tree {
         self.element_patch(self.leaves[i])
     }
 
-    /// The leaves as a mesh: face by face, corners shared between the leaves of a face.
-    pub fn leaf_mesh(&self) -> Mesh {
+    /// The leaves as a mesh: face by face, corners shared between the leaves of a face on the
+    /// same side of where light reaches (`buried` tells a leaf no light reaches). A buried
+    /// leaf's corners are its own: shared, they carried the lit side's light into it (under a
+    /// teddy bear's feet) and its dark onto the lit side (a roof where a wall passes through).
+    pub fn leaf_mesh(&self, buried: impl Fn(u32) -> bool) -> Mesh {
         let mut mesh = Mesh::default();
-        let mut corner_ids: HashMap<(u32, [u32; 2]), u32> = HashMap::new();
+        let mut corner_ids: HashMap<(u32, [u32; 2], bool), u32> = HashMap::new();
         for &leaf in &self.leaves {
+            let side = buried(leaf);
             let element = self.nodes[leaf as usize]
                 .element
                 .as_ref()
@@ -390,7 +394,7 @@ impl Tree {
             let count = element.patch.polygon.corners().len();
             let mut corners = [0u32; 4];
             for (k, &at) in element.lattice[..count].iter().enumerate() {
-                corners[k] = *corner_ids.entry((face, at)).or_insert_with(|| {
+                corners[k] = *corner_ids.entry((face, at, side)).or_insert_with(|| {
                     mesh.positions.push(element.patch.polygon.corners()[k]);
                     mesh.positions.len() as u32 - 1
                 });

@@ -450,7 +450,9 @@ pub fn clamp_below_zero(mut values: Vec<Rgb>) -> Vec<Rgb> {
 #[cfg(test)]
 mod tests {
     use super::{CornerLight, second_order_mean};
-    use crate::hierarchy::fixtures::{add_parallelogram, closed_cube, room_with_a_box};
+    use crate::hierarchy::fixtures::{
+        add_parallelogram, closed_cube, floor_cut_by_a_box, room_with_a_box,
+    };
     use crate::scene::{Material, Rgb, Scene};
     use crate::visibility::Occluders;
     use crate::{
@@ -526,6 +528,41 @@ mod tests {
             assert!(
                 ((got - Rgb::splat(expected)).abs() / expected).max_element() < 1e-5,
                 "hierarchical {hierarchical}: {got} against Howell B-3 {expected}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_floor_through_a_box_shows_no_light_inside_it_and_its_light_up_to_the_wall() {
+        // The floor beyond x = 0.5 lies inside a closed box: no light reaches it. Its leaves
+        // keep corners of their own along the wall, so the viewer's floor is dark exactly
+        // inside and lit exactly outside; shared, the corners on the wall's line carried the
+        // lamp's light half a leaf into the box.
+        let scene = floor_cut_by_a_box(0.5);
+        let solved = solve_scene(scene, &request(true), &crate::no_progress).expect("solves");
+        let floor: Vec<_> = solved.mesh.patches.iter().filter(|p| p.face == 0).collect();
+        let corners = |p: &crate::mesh::Patch| {
+            p.corners[..p.corner_count()]
+                .iter()
+                .map(|&c| solved.vertex_radiosity[c as usize])
+                .collect::<Vec<Rgb>>()
+        };
+        let (inside, outside): (Vec<_>, Vec<_>) = floor.iter().partition(|p| p.centroid.x > 0.5);
+        assert!(!inside.is_empty() && !outside.is_empty());
+        for patch in inside {
+            assert!(
+                corners(patch).iter().all(|b| *b == Rgb::ZERO),
+                "inside the box at {}: {:?}",
+                patch.centroid,
+                corners(patch)
+            );
+        }
+        for patch in outside {
+            assert!(
+                corners(patch).iter().all(|b| b.min_element() > 0.0),
+                "lit floor at {}: {:?}",
+                patch.centroid,
+                corners(patch)
             );
         }
     }
