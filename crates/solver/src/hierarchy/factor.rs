@@ -5,7 +5,7 @@
 
 use super::Hierarchy;
 use super::shaft::{Visibility, shaft_visibility};
-use super::tree::{Bounds, Element, Node};
+use super::tree::{Bounds, Element, Node, SurfacePoint};
 use crate::geometry::point_to_polygon_form_factor;
 use crate::mesh::Patch;
 use crate::pair::{
@@ -18,8 +18,10 @@ use glam::DVec3;
 use std::f64::consts::PI;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-/// Point pairs sampled for the factor of a link that involves a cluster.
+/// Cluster points whose analytic factor onto the receiver a cluster link's factor averages.
 const CLUSTER_SAMPLES: u32 = 16;
+/// Shadow rays for a cluster link's visibility, from its points in proportion to their factor.
+const CLUSTER_RAYS: u32 = 4;
 /// Shadow rays at each of a partly hidden pair's first four (three) receiver points
 /// ([`LinkFactors::measure_visibility`]).
 const PROBE_RAYS_PER_POINT: u32 = 4;
@@ -321,32 +323,48 @@ impl<'a> LinkFactors<'a> {
     /// The factor from element `receiver` to cluster `source`, visibility included, by
     /// reciprocity from the source's side: `F_RS = (A_S / A_R) E_y[F_{y->R} V]` over points `y`
     /// spread by area on the source's faces, `F_{y->R}` the analytic point-to-polygon factor
-    /// onto the receiver and `V` one shadow ray to a point of it (`seed` picks the sample
-    /// stream). Unbiased, and each term is bounded; the point-to-point kernel
-    /// `cos cos / (pi d^2)` sampled at both ends was not, and capped at one it ran a real
-    /// model's indirect light 25% low (the monastery's walls).
+    /// onto the receiver and `V` whether a shadow ray reaches a point of it (`seed` picks the
+    /// sample stream). Each term is bounded; the point-to-point kernel `cos cos / (pi d^2)`
+    /// sampled at both ends was not, and capped at one it ran a real model's indirect light
+    /// 25% low (the monastery's walls). The analytic part is cheap and the rays are not: the
+    /// [`CLUSTER_RAYS`] rays go to points drawn in proportion to their factor (systematic
+    /// sampling), so their share of clear rays is the factor-weighted visibility.
     fn sampled_factor(&self, receiver: u32, source: u32, seed: u64) -> f64 {
         let r = self.hierarchy.tree.element_patch(receiver);
-        let (mut sum, mut cast) = (0.0, 0);
-        for k in 0..CLUSTER_SAMPLES {
-            let y = self.hierarchy.tree.sample(source, k, splitmix64(seed));
-            let onto = point_to_polygon_form_factor(y.position, y.normal, &r.polygon, r.normal);
-            if onto == 0.0 {
-                continue;
-            }
-            let (u, v) = stratified_uv(k, seed);
-            cast += 1;
-            if self.occluders.segment_is_clear(
-                r.polygon.point_at(u, v),
-                y.position,
-                [r.face, y.face],
-            ) {
-                sum += onto;
+        let points: Vec<(SurfacePoint, f64)> = (0..CLUSTER_SAMPLES)
+            .map(|k| {
+                let y = self.hierarchy.tree.sample(source, k, splitmix64(seed));
+                let onto = point_to_polygon_form_factor(y.position, y.normal, &r.polygon, r.normal);
+                (y, onto)
+            })
+            .collect();
+        let unoccluded: f64 = points.iter().map(|(_, f)| f).sum();
+        if unoccluded == 0.0 {
+            return 0.0;
+        }
+        // Ray j goes to the point where the running sum of factors passes (j + jitter) / M of
+        // the total.
+        let jitter = (splitmix64(seed ^ 0x5EED) >> 11) as f64 / (1u64 << 53) as f64;
+        let threshold = |j: u32| (j as f64 + jitter) / CLUSTER_RAYS as f64 * unoccluded;
+        let (mut clear, mut cast, mut running) = (0, 0, 0.0);
+        for (k, (y, onto)) in points.iter().enumerate() {
+            running += onto;
+            while cast < CLUSTER_RAYS && threshold(cast) <= running {
+                let (u, v) = stratified_uv(cast, seed ^ k as u64);
+                let x = r.polygon.point_at(u, v);
+                if self
+                    .occluders
+                    .segment_is_clear(x, y.position, [r.face, y.face])
+                {
+                    clear += 1;
+                }
+                cast += 1;
             }
         }
         // Counted once a pair: an atomic add a ray had both threads fight over its cache line.
-        self.rays_cast.fetch_add(cast, Ordering::Relaxed);
-        (self.node(source).area / r.area * sum / CLUSTER_SAMPLES as f64).min(1.0)
+        self.rays_cast.fetch_add(cast as u64, Ordering::Relaxed);
+        let visible = clear as f64 / CLUSTER_RAYS as f64;
+        (self.node(source).area / r.area * unoccluded / CLUSTER_SAMPLES as f64 * visible).min(1.0)
     }
 }
 
