@@ -414,7 +414,7 @@ fn integration_level(p: &Patch, q: &Patch, mean: f64, spread: f64) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hierarchy::fixtures::{add_parallelogram, screened_lamp};
+    use crate::hierarchy::fixtures::{GREY, add_parallelogram, screened_lamp};
     use crate::scene::{Material, Rgb, Scene};
     use glam::dvec3;
 
@@ -505,10 +505,7 @@ mod tests {
         // of it capped at one ran far low. By reciprocity the exact factor is the squares'
         // area over the floor's times the mean of their points' analytic factors onto it.
         let mut scene = Scene::default();
-        let grey = Material {
-            reflectance: Rgb::splat(0.5),
-            emission: Rgb::ZERO,
-        };
+        let grey = GREY;
         let (x, y) = (DVec3::X, DVec3::Y);
         add_parallelogram(&mut scene, "floor", (DVec3::ZERO, x * 2.0, y * 2.0), grey);
         for corner in [dvec3(0.25, 0.25, 0.05), dvec3(1.25, 1.25, 0.05)] {

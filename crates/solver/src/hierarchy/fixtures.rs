@@ -7,6 +7,12 @@ use crate::solve::SolverSettings;
 use crate::visibility::Occluders;
 use glam::{DVec3, dvec3};
 
+/// The grey of the test scenes' walls and floors: reflectance 0.5, no emission.
+pub(crate) const GREY: Material = Material {
+    reflectance: Rgb::splat(0.5),
+    emission: Rgb::ZERO,
+};
+
 /// A closed unit cube, faces inwards, every face emitting 1 with reflectance 0.5.
 pub(crate) fn closed_cube() -> Scene {
     let mut scene = Scene::default();
@@ -32,10 +38,7 @@ pub(crate) fn closed_cube() -> Scene {
 /// the lamp beyond `edge` (in x) from the floor's view straight up.
 pub(crate) fn screened_lamp(height: f64, edge: f64) -> Scene {
     let mut scene = Scene::default();
-    let grey = Material {
-        reflectance: Rgb::splat(0.5),
-        emission: Rgb::ZERO,
-    };
+    let grey = GREY;
     let lamp = Material {
         emission: Rgb::ONE,
         ..grey
@@ -75,10 +78,7 @@ pub(crate) fn build(scene: &Scene, error: f64) -> Hierarchy {
 /// on the floor over [1, 2] x [1, 2]: lattice lines of the floor at depth 2.
 pub(crate) fn room_with_a_box() -> Scene {
     let mut scene = Scene::default();
-    let grey = Material {
-        reflectance: Rgb::splat(0.5),
-        emission: Rgb::ZERO,
-    };
+    let grey = GREY;
     let lamp = Material {
         reflectance: Rgb::splat(0.5),
         emission: Rgb::ONE,
@@ -106,10 +106,7 @@ pub(crate) fn room_with_a_box() -> Scene {
 /// beyond `x = edge` lies inside the box, where no light reaches.
 pub(crate) fn floor_cut_by_a_box(edge: f64) -> Scene {
     let mut scene = Scene::default();
-    let grey = Material {
-        reflectance: Rgb::splat(0.5),
-        emission: Rgb::ZERO,
-    };
+    let grey = GREY;
     let lamp = Material {
         emission: Rgb::ONE,
         ..grey

@@ -715,7 +715,7 @@ impl LinkErrors {
 mod tests {
     use super::*;
     use crate::hierarchy::MIN_RADIUS_PER_ERROR;
-    use crate::hierarchy::fixtures::{add_parallelogram, build, screened_lamp, unit_box};
+    use crate::hierarchy::fixtures::{GREY, add_parallelogram, build, screened_lamp, unit_box};
     use crate::input::contact::split_at_contacts;
     use crate::scene::{Material, Scene};
     use glam::{DVec3, dvec3};
@@ -767,10 +767,7 @@ mod tests {
     #[test]
     fn a_sliver_is_as_small_as_its_area_and_a_square_as_its_corners() {
         let mut scene = Scene::default();
-        let grey = Material {
-            reflectance: Rgb::splat(0.5),
-            emission: Rgb::ZERO,
-        };
+        let grey = GREY;
         add_parallelogram(
             &mut scene,
             "square",
@@ -850,10 +847,7 @@ mod tests {
     fn a_large_floor_refines_to_the_scale_of_what_stands_on_it() {
         // A 20 m floor, a 1 m box on it and a 1 m lamp above: the median face is the box's.
         let mut scene = Scene::default();
-        let grey = Material {
-            reflectance: Rgb::splat(0.5),
-            emission: Rgb::ZERO,
-        };
+        let grey = GREY;
         let (x, z) = (DVec3::X, DVec3::Z);
         add_parallelogram(&mut scene, "part", (DVec3::ZERO, z * 20.0, x * 20.0), grey);
         for sides in unit_box(dvec3(9.5, 0.0, 9.5)) {
