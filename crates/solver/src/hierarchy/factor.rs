@@ -505,11 +505,10 @@ mod tests {
         // of it capped at one ran far low. By reciprocity the exact factor is the squares'
         // area over the floor's times the mean of their points' analytic factors onto it.
         let mut scene = Scene::default();
-        let grey = GREY;
         let (x, y) = (DVec3::X, DVec3::Y);
-        add_parallelogram(&mut scene, "floor", (DVec3::ZERO, x * 2.0, y * 2.0), grey);
+        add_parallelogram(&mut scene, "floor", (DVec3::ZERO, x * 2.0, y * 2.0), GREY);
         for corner in [dvec3(0.25, 0.25, 0.05), dvec3(1.25, 1.25, 0.05)] {
-            add_parallelogram(&mut scene, "square", (corner, y * 0.5, x * 0.5), grey);
+            add_parallelogram(&mut scene, "square", (corner, y * 0.5, x * 0.5), GREY);
         }
         let hierarchy = Hierarchy::cluster_tree(&scene);
         let occluders = Occluders::new(&scene);

@@ -38,19 +38,18 @@ pub(crate) fn closed_cube() -> Scene {
 /// the lamp beyond `edge` (in x) from the floor's view straight up.
 pub(crate) fn screened_lamp(height: f64, edge: f64) -> Scene {
     let mut scene = Scene::default();
-    let grey = GREY;
     let lamp = Material {
         emission: Rgb::ONE,
-        ..grey
+        ..GREY
     };
     let (x, y) = (DVec3::X, DVec3::Y);
-    add_parallelogram(&mut scene, "floor", (DVec3::ZERO, x, y), grey);
+    add_parallelogram(&mut scene, "floor", (DVec3::ZERO, x, y), GREY);
     add_parallelogram(&mut scene, "lamp", (dvec3(0.0, 0.0, 10.0), y, x), lamp);
     add_parallelogram(
         &mut scene,
         "screen",
         (dvec3(-5.0, -5.0, height), y * 10.0, x * (5.0 + edge)),
-        grey,
+        GREY,
     );
     scene
 }
@@ -78,14 +77,13 @@ pub(crate) fn build(scene: &Scene, error: f64) -> Hierarchy {
 /// on the floor over [1, 2] x [1, 2]: lattice lines of the floor at depth 2.
 pub(crate) fn room_with_a_box() -> Scene {
     let mut scene = Scene::default();
-    let grey = GREY;
     let lamp = Material {
         reflectance: Rgb::splat(0.5),
         emission: Rgb::ONE,
     };
     let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
     let s = 4.0;
-    add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z * s, x * s), grey);
+    add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z * s, x * s), GREY);
     add_parallelogram(&mut scene, "ceiling", (y * s, x * s, z * s), lamp);
     for sides in [
         (DVec3::ZERO, y * s, z * s),
@@ -93,10 +91,10 @@ pub(crate) fn room_with_a_box() -> Scene {
         (DVec3::ZERO, x * s, y * s),
         (z * s, y * s, x * s),
     ] {
-        add_parallelogram(&mut scene, "wall", sides, grey);
+        add_parallelogram(&mut scene, "wall", sides, GREY);
     }
     for sides in unit_box(dvec3(1.0, 0.0, 1.0)) {
-        add_parallelogram(&mut scene, "box", sides, grey);
+        add_parallelogram(&mut scene, "box", sides, GREY);
     }
     scene
 }
@@ -106,19 +104,18 @@ pub(crate) fn room_with_a_box() -> Scene {
 /// beyond `x = edge` lies inside the box, where no light reaches.
 pub(crate) fn floor_cut_by_a_box(edge: f64) -> Scene {
     let mut scene = Scene::default();
-    let grey = GREY;
     let lamp = Material {
         emission: Rgb::ONE,
-        ..grey
+        ..GREY
     };
     let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
-    add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z, x), grey);
+    add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z, x), GREY);
     add_parallelogram(&mut scene, "lamp", (y * 10.0, x, z), lamp);
     let (corner, size) = (dvec3(edge, -0.5, -0.5), dvec3(1.0, 0.6, 2.0));
     let bottom = (corner, x, z);
     for (origin, u, v) in unit_box(corner).into_iter().chain([bottom]) {
         let sides = (corner + (origin - corner) * size, u * size, v * size);
-        add_parallelogram(&mut scene, "box", sides, grey);
+        add_parallelogram(&mut scene, "box", sides, GREY);
     }
     scene
 }

@@ -767,12 +767,11 @@ mod tests {
     #[test]
     fn a_sliver_is_as_small_as_its_area_and_a_square_as_its_corners() {
         let mut scene = Scene::default();
-        let grey = GREY;
         add_parallelogram(
             &mut scene,
             "square",
             (DVec3::ZERO, DVec3::X, DVec3::Z),
-            grey,
+            GREY,
         );
         // A triangle 4 m long and 1 cm wide, standing a little away.
         let strip = scene.add_object("strip");
@@ -780,7 +779,7 @@ mod tests {
         scene.add_polygon(
             strip,
             &[at, at + DVec3::X * 4.0, at + dvec3(4.0, 0.0, 0.01)],
-            grey,
+            GREY,
         );
         let hierarchy = build(&scene, 0.5);
         let size = |face: usize| {
@@ -847,11 +846,10 @@ mod tests {
     fn a_large_floor_refines_to_the_scale_of_what_stands_on_it() {
         // A 20 m floor, a 1 m box on it and a 1 m lamp above: the median face is the box's.
         let mut scene = Scene::default();
-        let grey = GREY;
         let (x, z) = (DVec3::X, DVec3::Z);
-        add_parallelogram(&mut scene, "part", (DVec3::ZERO, z * 20.0, x * 20.0), grey);
+        add_parallelogram(&mut scene, "part", (DVec3::ZERO, z * 20.0, x * 20.0), GREY);
         for sides in unit_box(dvec3(9.5, 0.0, 9.5)) {
-            add_parallelogram(&mut scene, "part", sides, grey);
+            add_parallelogram(&mut scene, "part", sides, GREY);
         }
         add_parallelogram(
             &mut scene,
