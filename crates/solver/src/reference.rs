@@ -7,7 +7,7 @@
 //! (seed, probe index), so the result is the same for any thread count.
 
 use crate::Progress;
-use crate::sampling::cosine_direction;
+use crate::sampling::{cosine_direction, unit_interval};
 use crate::scene::{Rgb, Scene};
 use crate::visibility::Occluders;
 use glam::DVec3;
@@ -48,8 +48,7 @@ pub struct Reference {
 }
 
 fn uniform(rng: &mut Pcg64Mcg) -> f64 {
-    // 53 random bits: uniform in [0, 1).
-    (rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    unit_interval(rng.next_u64())
 }
 
 /// Chooses an index with probability proportional to `weights` through their running sums.

@@ -20,6 +20,12 @@ pub fn pair_seed(a: usize, b: usize) -> u64 {
     splitmix64(((a as u64) << 32) | b as u64)
 }
 
+/// The top 53 bits of `bits` as a number uniform in [0, 1): every `f64` step there is equally
+/// likely.
+pub fn unit_interval(bits: u64) -> f64 {
+    (bits >> 11) as f64 / (1u64 << 53) as f64
+}
+
 /// The k-th point of Roberts' R2 sequence, rotated by `offset` (Cranley-Patterson), kept off the
 /// patch border so that a ray never starts on a shared edge.
 pub fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
@@ -27,7 +33,7 @@ pub fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
     const A1: f64 = 0.754_877_666_246_692_7;
     const A2: f64 = 0.569_840_290_998_053_2;
     let (u0, v0) = (
-        (offset >> 11) as f64 / (1u64 << 53) as f64,
+        unit_interval(offset),
         (offset & 0xFFFF_FFFF) as f64 / 4_294_967_296.0,
     );
     // x >= 0, so its fraction is x less its integer part, the same bits as `fract` without the

@@ -8,6 +8,7 @@ mod town;
 pub use room::furnished_room;
 pub use town::town;
 
+use crate::sampling::unit_interval;
 use glam::DVec3;
 use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -53,7 +54,7 @@ impl Writer {
     }
 
     fn unit(&mut self) -> f64 {
-        (self.rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+        unit_interval(self.rng.next_u64())
     }
 
     fn between(&mut self, low: f64, high: f64) -> f64 {

@@ -12,7 +12,7 @@ use crate::pair::{
     FormFactorSettings, facing_kernel, mutually_facing, near_pair_level, rays_for_pair,
     unoccluded_form_factor,
 };
-use crate::sampling::{pair_seed, splitmix64, stratified_uv};
+use crate::sampling::{pair_seed, splitmix64, stratified_uv, unit_interval};
 use crate::visibility::Occluders;
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -344,7 +344,7 @@ impl<'a> LinkFactors<'a> {
         }
         // Ray j goes to the point where the running sum of factors passes (j + jitter) / M of
         // the total.
-        let jitter = (splitmix64(seed ^ 0x5EED) >> 11) as f64 / (1u64 << 53) as f64;
+        let jitter = unit_interval(splitmix64(seed ^ 0x5EED));
         let threshold = |j: u32| (j as f64 + jitter) / CLUSTER_RAYS as f64 * unoccluded;
         let (mut clear, mut cast, mut running) = (0, 0, 0.0);
         for (k, (y, onto)) in points.iter().enumerate() {

@@ -205,7 +205,7 @@ pub(super) fn shaft_visibility(tree: &Tree, p: &Patch, q: &Patch) -> Visibility 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sampling::splitmix64;
+    use crate::sampling::{splitmix64, unit_interval};
     use glam::dvec3;
 
     #[test]
@@ -217,7 +217,7 @@ mod tests {
         let mut seed = 7u64;
         let mut unit = || {
             seed = splitmix64(seed);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
+            unit_interval(seed)
         };
         for _ in 0..1000 {
             let p = a.0 + (a.1 - a.0) * DVec3::new(unit(), unit(), unit());

@@ -4,7 +4,7 @@
 
 use crate::geometry::{Polygon, bounds};
 use crate::mesh::{Mesh, Patch};
-use crate::sampling::{splitmix64, stratified_uv};
+use crate::sampling::{splitmix64, stratified_uv, unit_interval};
 use crate::scene::Scene;
 use glam::DVec3;
 use std::collections::HashMap;
@@ -339,7 +339,7 @@ impl Tree {
                 face: e.patch.face,
             };
         }
-        let pick = (splitmix64(seed ^ k as u64) >> 11) as f64 / (1u64 << 53) as f64;
+        let pick = unit_interval(splitmix64(seed ^ k as u64));
         let (start, end) = (node.faces.start as usize, node.faces.end as usize);
         let target =
             self.area_prefix[start] + pick * (self.area_prefix[end] - self.area_prefix[start]);
