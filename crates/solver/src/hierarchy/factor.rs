@@ -331,13 +331,15 @@ impl<'a> LinkFactors<'a> {
     /// sampling), so their share of clear rays is the factor-weighted visibility.
     fn sampled_factor(&self, receiver: u32, source: u32, seed: u64) -> f64 {
         let r = self.hierarchy.tree.element_patch(receiver);
-        let points: Vec<(SurfacePoint, f64)> = (0..CLUSTER_SAMPLES)
-            .map(|k| {
-                let y = self.hierarchy.tree.sample(source, k, splitmix64(seed));
-                let onto = point_to_polygon_form_factor(y.position, y.normal, &r.polygon, r.normal);
-                (y, onto)
-            })
-            .collect();
+        // On the stack: this runs once for each of millions of cluster links.
+        let points: [(SurfacePoint, f64); CLUSTER_SAMPLES as usize] = std::array::from_fn(|k| {
+            let y = self
+                .hierarchy
+                .tree
+                .sample(source, k as u32, splitmix64(seed));
+            let onto = point_to_polygon_form_factor(y.position, y.normal, &r.polygon, r.normal);
+            (y, onto)
+        });
         let unoccluded: f64 = points.iter().map(|(_, f)| f).sum();
         if unoccluded == 0.0 {
             return 0.0;
