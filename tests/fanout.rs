@@ -128,13 +128,21 @@ async fn edge(url: &str, root: impl Into<Option<&str>>) -> EdgeServer {
 /// Waits until `shared` holds a final state with `checksum` (and at least `version`).
 async fn final_state(shared: &Shared, version: u64, checksum: u32) {
     let mut updates = shared.hub.subscribe();
-    tokio::time::timeout(
+    // The borrowed state is dropped at once: held, it would block the edge's next install.
+    let arrived = tokio::time::timeout(
         PATIENCE,
         updates.wait_for(|p| p.is_final && p.version >= version && p.checksum == checksum),
     )
     .await
-    .expect("the state arrives")
-    .expect("the hub lives");
+    .map(|held| held.map(|_| ()).expect("the hub lives"));
+    if arrived.is_err() {
+        let held = shared.hub.current();
+        panic!(
+            "version {version} (final, checksum {checksum:08x}) never arrived: the hub holds \
+             version {} (final {}, checksum {:08x}, geometry {})",
+            held.version, held.is_final, held.checksum, held.geometry_version
+        );
+    }
     // The origin's record of the version's sum of responses follows the frame.
     tokio::time::timeout(PATIENCE, async {
         while server::http::routes::solution_summary(shared)
@@ -199,8 +207,9 @@ async fn first_messages(address: SocketAddr) -> Vec<Vec<u8>> {
     messages
 }
 
-/// Everything a viewer or a client can ask of a server, which must be equal on origin and edge.
-async fn served_bytes(address: SocketAddr) -> Vec<Vec<u8>> {
+/// Everything a viewer or a client can ask of a server, which must be equal on origin and edge:
+/// each body by what it answers (the two first WebSocket messages as `ws hello`, `ws frame`).
+async fn served_bytes(address: SocketAddr) -> Vec<(&'static str, Vec<u8>)> {
     let mut all = Vec::new();
     for path in [
         "/api/solution",
@@ -210,10 +219,30 @@ async fn served_bytes(address: SocketAddr) -> Vec<Vec<u8>> {
     ] {
         let (status, body) = get(address, path).await;
         assert_eq!(status, 200, "{path}");
-        all.push(body);
+        all.push((path, body));
     }
-    all.extend(first_messages(address).await);
+    all.extend(
+        ["ws hello", "ws frame"]
+            .into_iter()
+            .zip(first_messages(address).await),
+    );
     all
+}
+
+/// Asserts that `address` serves what the origin at `origin` does, naming the first body that
+/// differs (as text where it is text).
+async fn serves_as_origin(address: SocketAddr, origin: SocketAddr) {
+    let (served, expected) = (served_bytes(address).await, served_bytes(origin).await);
+    for ((what, body), (_, origin_body)) in served.iter().zip(&expected) {
+        assert!(
+            body == origin_body,
+            "{address} serves {what} unlike the origin {origin}: {} bytes against {}:\n{}\n{}",
+            body.len(),
+            origin_body.len(),
+            String::from_utf8_lossy(&body[..body.len().min(600)]),
+            String::from_utf8_lossy(&origin_body[..origin_body.len().min(600)]),
+        );
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -239,10 +268,7 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
     }
     for (viewer, address) in viewers.iter_mut().zip(servers) {
         viewer.ends_with(checksum).await;
-        assert_eq!(
-            served_bytes(address).await,
-            served_bytes(origin.address).await
-        );
+        serves_as_origin(address, origin.address).await;
     }
     let before = checksum;
     // Protocol 3 on an edge: the light's response once, then sums, as on the origin.
@@ -325,10 +351,7 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
             [2],
             "{address}: told of the move once"
         );
-        assert_eq!(
-            served_bytes(address).await,
-            served_bytes(origin.address).await
-        );
+        serves_as_origin(address, origin.address).await;
     }
 
     // An edge started now is served from the snapshots at once, without the origin's help.
@@ -344,10 +367,7 @@ async fn origin_and_edges_serve_the_same_bytes_through_edits_moves_and_a_late_st
         late.buffer.sum.is_some(),
         "a late edge serves the sum from the stored responses"
     );
-    assert_eq!(
-        served_bytes(edge_c.address).await,
-        served_bytes(origin.address).await
-    );
+    serves_as_origin(edge_c.address, origin.address).await;
     let (status, scenes) = get_text(edge_c.address, "/scenes").await;
     assert_eq!(status, 200);
     assert!(scenes.contains(&format!("\"{name}\"")), "{scenes}");
