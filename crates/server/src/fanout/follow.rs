@@ -24,7 +24,6 @@ struct Snapshot {
     geometry: GeometryState,
     state: Published,
     record: SceneRecord,
-    record_version: u64,
     /// The stored sum of `state`'s version, when there is one.
     sum: Option<Bytes>,
 }
@@ -89,7 +88,7 @@ async fn read_snapshot(
         anyhow::bail!("{} is not a full frame", full_object(scene));
     };
     let state = Published::new(frame.info, frame.colours, None, tag.geometry_version);
-    let (record_tag, record) = read_object(objects, &record_object(scene)).await?;
+    let (_, record) = read_object(objects, &record_object(scene)).await?;
     let record: SceneRecord = serde_json::from_slice(&record)?;
     if record.run != tag.run {
         anyhow::bail!("the record of '{scene}' is being replaced");
@@ -106,7 +105,6 @@ async fn read_snapshot(
         geometry,
         state,
         record,
-        record_version: record_tag.version,
         sum,
     })
 }
@@ -275,14 +273,13 @@ async fn watch_health(edge: Arc<Edge>) {
     }
 }
 
-/// The report, emissions and origin health of `record` (sent with solution `version`; none
-/// older than the one in use), for `/api/solution`, `/api/objects`
-/// and `/healthz`.
-fn take_record(shared: &Shared, scene: &str, record: SceneRecord, version: u64) {
+/// The report, emissions and origin health of `record` (none older than the one in use), for
+/// `/api/solution`, `/api/objects` and `/healthz`.
+fn take_record(shared: &Shared, scene: &str, record: SceneRecord) {
     if upstream(shared)
-        .record_version
-        .fetch_max(version, Ordering::Relaxed)
-        > version
+        .record_sequence
+        .fetch_max(record.sequence, Ordering::Relaxed)
+        > record.sequence
     {
         return;
     }
@@ -319,11 +316,9 @@ impl Edge {
         else {
             return;
         };
-        let version = header::<u64>(message, headers::VERSION);
         match serde_json::from_slice::<SceneRecord>(&message.payload) {
             Ok(record) if record.run == upstream(&shared).run => {
-                let Some(version) = version else { return };
-                take_record(&shared, scene, record, version)
+                take_record(&shared, scene, record)
             }
             Ok(_) => {}
             Err(error) => tracing::warn!("edge: a record of '{scene}' is unreadable: {error}"),
@@ -344,16 +339,7 @@ impl Edge {
                 return None;
             }
         };
-        let upstream = Upstream {
-            nats: self.nats.clone(),
-            scene: scene.to_string(),
-            run: snapshot.tag.run.clone(),
-            last_heard: Instant::now().into(),
-            record_version: 0.into(),
-            stale: false.into(),
-            sum_checksum: None.into(),
-            pending_sum: None.into(),
-        };
+        let upstream = Upstream::new(self.nats.clone(), scene, &snapshot.tag.run);
         let hub = Hub::restore(snapshot.geometry, snapshot.state);
         let shared = Shared::in_process(self.process.clone(), hub, String::new(), Some(upstream));
         if let Some(encoded) = snapshot.sum {
@@ -363,7 +349,7 @@ impl Edge {
             }
         }
         // Before anyone can ask: /api/solution must not answer without the report.
-        take_record(&shared, scene, snapshot.record, snapshot.record_version);
+        take_record(&shared, scene, snapshot.record);
         let served = Arc::new(Served {
             router: crate::http::routes::router(shared.clone()),
             shared: shared.clone(),
@@ -550,12 +536,65 @@ impl Edge {
                     let state = with_sum_of(objects, shared, snapshot.state, snapshot.sum).await;
                     shared.hub.install(state);
                 }
-                take_record(shared, name, snapshot.record, snapshot.record_version);
+                take_record(shared, name, snapshot.record);
             }
             Err(error) => {
                 tracing::warn!("edge: cannot read the snapshot of '{name}': {error:#}");
                 link.stale.store(true, Ordering::Relaxed);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fanout::Nats;
+    use crate::{Limits, Process};
+
+    #[tokio::test]
+    async fn a_record_older_than_the_one_held_is_not_taken() {
+        // Nothing answers on this port: the client connects lazily, and records need no NATS.
+        let nats = Nats::connect("nats://127.0.0.1:9", "test edge")
+            .await
+            .unwrap();
+        let geometry = Geometry {
+            positions: vec![[0.0; 3]; 3],
+            patches: vec![[0, 1, 2, wire::geometry::NO_CORNER]],
+            patch_objects: vec![0],
+            objects: vec!["thing".into()],
+            camera: None,
+            textures: None,
+        };
+        let hub = Hub::new(1, &geometry, Arc::from([]), &[[1.0; 3]; 3]);
+        let upstream = Upstream::new(nats, "scene", "run-1");
+        let shared = Shared::in_process(
+            Process::new(Limits::default()),
+            hub,
+            String::new(),
+            Some(upstream),
+        );
+        let record = |sequence, sum_checksum, health: &str| SceneRecord {
+            run: "run-1".into(),
+            report: None,
+            emissions: Vec::new(),
+            health: health.into(),
+            sum_checksum,
+            sequence,
+        };
+        let served = || {
+            let summary = crate::http::routes::solution_summary(&shared);
+            (summary.sum_checksum, shared.health.text())
+        };
+        // The stored record, read while two live ones of the same version queued behind it:
+        // the first of those came before the sum's checksum and must not take it away.
+        take_record(&shared, "scene", record(2, Some((1, 7)), "ok"));
+        take_record(&shared, "scene", record(1, None, "degraded: solving"));
+        assert_eq!(served(), (Some(7), "ok".to_string()));
+        take_record(&shared, "scene", record(2, Some((1, 7)), "ok"));
+        assert_eq!(served(), (Some(7), "ok".to_string()));
+        // A newer one is taken, whatever it says.
+        take_record(&shared, "scene", record(3, None, "ok"));
+        assert_eq!(served(), (None, "ok".to_string()));
     }
 }

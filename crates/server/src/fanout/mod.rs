@@ -199,6 +199,11 @@ pub struct SceneRecord {
     /// serve frames only, but the same `/api/solution`).
     #[serde(default)]
     pub sum_checksum: Option<(u64, u32)>,
+    /// The record's place among its run's records, from 1. Several can go with one solution
+    /// version (the sum's checksum follows its frame), and an edge reads the stored one while
+    /// live ones queue: it takes none older than the one it holds.
+    #[serde(default)]
+    pub sequence: u64,
 }
 
 /// Which snapshot an object is: its version, geometry version, run and scene id.
@@ -311,9 +316,9 @@ pub struct Upstream {
     pub run: String,
     /// When the origin last said it was alive (or sent anything).
     pub last_heard: std::sync::Mutex<std::time::Instant>,
-    /// The solution version the record in use was sent with: an older one (a snapshot read
-    /// while a newer record was on its way) is not taken.
-    pub record_version: std::sync::atomic::AtomicU64,
+    /// The [`SceneRecord::sequence`] of the record in use: an older one (a live record that
+    /// queued while the snapshot was read) is not taken.
+    pub record_sequence: std::sync::atomic::AtomicU64,
     /// Set when a frame could not be applied (a gap, a newer geometry not yet stored): the
     /// snapshot is read again.
     pub stale: std::sync::atomic::AtomicBool,
@@ -324,6 +329,20 @@ pub struct Upstream {
 }
 
 impl Upstream {
+    /// A link to `run` of `scene`'s origin, heard now, with no record taken yet.
+    pub fn new(nats: Nats, scene: &str, run: &str) -> Upstream {
+        Upstream {
+            nats,
+            scene: scene.to_string(),
+            run: run.to_string(),
+            last_heard: std::time::Instant::now().into(),
+            record_sequence: 0.into(),
+            stale: false.into(),
+            sum_checksum: None.into(),
+            pending_sum: None.into(),
+        }
+    }
+
     /// Seconds since the origin was last heard.
     pub fn silent_for(&self) -> Duration {
         self.last_heard.lock().expect("heard lock").elapsed()

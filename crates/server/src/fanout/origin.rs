@@ -45,6 +45,8 @@ async fn publish(shared: &Shared, nats: &Nats, scene: &str, run: &str) {
     let mut alive = tokio::time::interval(super::ALIVE_INTERVAL);
     let mut store = None;
     let mut sent = None;
+    // Records sent this run; counted across reconnects, as edges keep the last they took.
+    let mut records = 0;
     loop {
         tokio::select! {
             changed = updates.changed() => if changed.is_err() { return },
@@ -56,7 +58,8 @@ async fn publish(shared: &Shared, nats: &Nats, scene: &str, run: &str) {
             _ = connects.changed() => (store, sent) = (None, None),
             _ = shared.process.shutdown.cancelled() => return,
         }
-        match publish_newest(shared, nats, scene, run, &mut store, &mut sent).await {
+        let sending = (&mut store, &mut sent, &mut records);
+        match publish_newest(shared, nats, scene, run, sending).await {
             Ok(()) => shared.health.recovered(Fault::Nats),
             Err(error) => {
                 store = None;
@@ -70,15 +73,18 @@ async fn publish(shared: &Shared, nats: &Nats, scene: &str, run: &str) {
 }
 
 /// Sends what NATS lacks of the hub's newest state: the geometry snapshot when it changed,
-/// the record when it changed, the frame (the delta when NATS holds its base), then the full
-/// frame and record snapshots.
+/// the record when it changed (numbered after the `records` sent before it), the frame (the
+/// delta when NATS holds its base), then the full frame and record snapshots.
 async fn publish_newest(
     shared: &Shared,
     nats: &Nats,
     scene: &str,
     run: &str,
-    store: &mut Option<object_store::ObjectStore>,
-    sent: &mut Option<Sent>,
+    (store, sent, records): (
+        &mut Option<object_store::ObjectStore>,
+        &mut Option<Sent>,
+        &mut u64,
+    ),
 ) -> anyhow::Result<()> {
     let objects = match store {
         Some(store) => store,
@@ -109,7 +115,14 @@ async fn publish_newest(
     }
     let record = record_of(shared, run, &current);
     let record_json = match sent.as_ref().map(|s| &s.record) != Some(&record) {
-        true => Some(announce_record(nats, scene, &record, current.version).await?),
+        true => {
+            *records += 1;
+            let numbered = SceneRecord {
+                sequence: *records,
+                ..record.clone()
+            };
+            Some(announce_record(nats, scene, &numbered).await?)
+        }
         false => None,
     };
     let (mut sum_version, mut responses) = sent
@@ -186,24 +199,22 @@ async fn store_geometry(
     put(objects, &geometry_object(scene), tag, &geometry.encoded).await
 }
 
-/// Publishes `record`, sent with solution `version`, and gives back its JSON to store. Sent
-/// before the frame, on the same connection: edges get the two in this order.
+/// Publishes `record` and gives back its JSON to store. Sent before the frame, on the same
+/// connection: edges get the two in this order.
 async fn announce_record(
     nats: &Nats,
     scene: &str,
     record: &SceneRecord,
-    version: u64,
 ) -> anyhow::Result<Vec<u8>> {
     let json = serde_json::to_vec(record)?;
-    let mut record_headers = async_nats::HeaderMap::new();
-    record_headers.insert(headers::VERSION, version.to_string());
     nats.client
-        .publish_with_headers(record_subject(scene), record_headers, json.clone().into())
+        .publish(record_subject(scene), json.clone().into())
         .await?;
     Ok(json)
 }
 
-/// What `/api/solution`, `/api/objects` and `/healthz` answer now, as edges are told it.
+/// What `/api/solution`, `/api/objects` and `/healthz` answer now, as edges are told it
+/// (numbered when it is sent).
 fn record_of(shared: &Shared, run: &str, current: &Published) -> SceneRecord {
     SceneRecord {
         run: run.to_string(),
@@ -214,6 +225,7 @@ fn record_of(shared: &Shared, run: &str, current: &Published) -> SceneRecord {
             .sum
             .as_ref()
             .map(|sum| (current.version, sum.checksum)),
+        sequence: 0,
     }
 }
 
