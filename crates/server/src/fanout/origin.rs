@@ -115,14 +115,7 @@ async fn publish_newest(
     }
     let record = record_of(shared, run, &current);
     let record_json = match sent.as_ref().map(|s| &s.record) != Some(&record) {
-        true => {
-            *records += 1;
-            let numbered = SceneRecord {
-                sequence: *records,
-                ..record.clone()
-            };
-            Some(announce_record(nats, scene, &numbered).await?)
-        }
+        true => Some(announce_record(nats, scene, &record, records).await?),
         false => None,
     };
     let (mut sum_version, mut responses) = sent
@@ -199,14 +192,19 @@ async fn store_geometry(
     put(objects, &geometry_object(scene), tag, &geometry.encoded).await
 }
 
-/// Publishes `record` and gives back its JSON to store. Sent before the frame, on the same
-/// connection: edges get the two in this order.
+/// Publishes `record`, numbered after the `records` sent before it, and gives back its JSON to
+/// store. Sent before the frame, on the same connection: edges get the two in this order.
 async fn announce_record(
     nats: &Nats,
     scene: &str,
     record: &SceneRecord,
+    records: &mut u64,
 ) -> anyhow::Result<Vec<u8>> {
-    let json = serde_json::to_vec(record)?;
+    *records += 1;
+    let json = serde_json::to_vec(&SceneRecord {
+        sequence: *records,
+        ..record.clone()
+    })?;
     nats.client
         .publish(record_subject(scene), json.clone().into())
         .await?;
