@@ -43,7 +43,14 @@ enum Command {
 }
 
 fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
+    let cli = Cli::parse();
+    // The main thread is one of rayon's workers: a parallel loop started from it runs there
+    // and is stolen from, instead of waking a pool thread and sleeping until the loop ends
+    // (docs/BENCHMARKS.md, "The main thread in the pool").
+    rayon::ThreadPoolBuilder::new()
+        .use_current_thread()
+        .build_global()?;
+    match cli.command {
         Command::Solve(command) => command.run(),
         Command::Reference(command) => command.run(),
         Command::Generate(command) => command.run(),
