@@ -160,6 +160,70 @@ fn a_solve_with_exact_probes_has_no_error_and_a_wrong_one_does() {
 }
 
 #[test]
+fn the_error_is_split_by_object_and_the_wrong_one_holds_all_of_it() {
+    // Two unlit squares, probes reading 2 on both; the solution reads 2 on the floor and 3 on
+    // the wall: the wall is 50% off and holds all the squared error, the floor none.
+    let mut scene = solver::Scene::default();
+    for (name, origin) in [
+        ("floor", dvec3(0.0, 0.0, 0.0)),
+        ("wall", dvec3(5.0, 0.0, 0.0)),
+    ] {
+        add_rect(
+            &mut scene,
+            name,
+            origin,
+            dvec3(0.0, 0.0, 1.0),
+            dvec3(1.0, 0.0, 0.0),
+            grey(0.5, 0.0),
+        );
+    }
+    let mesh = solver::Mesh::build(&scene, PatchTarget::Count(32));
+    let reads = |object: u32| if object == 0 { 2.0 } else { 3.0 };
+    let radiosity: Vec<Rgb> = mesh
+        .patches
+        .iter()
+        .map(|p| Rgb::splat(reads(p.object)))
+        .collect();
+    let mut corners = vec![Rgb::ZERO; mesh.positions.len()];
+    for patch in &mesh.patches {
+        for &c in &patch.corners[..patch.corner_count()] {
+            corners[c as usize] = Rgb::splat(reads(patch.object));
+        }
+    }
+    let probes: Vec<Probe> = place_probes(&scene, 200, 5)
+        .into_iter()
+        .map(|(face, p)| Probe {
+            position: p.to_array(),
+            face: scene.faces[face as usize].source,
+            object: String::new(),
+            radiosity: [2.0; 3],
+            standard_error: [0.0; 3],
+        })
+        .collect();
+    let error = evaluate(&scene, &mesh, &radiosity, &corners, &probes);
+    let [floor, wall] = &error.objects[..] else {
+        panic!("two objects: {:?}", error.objects);
+    };
+    assert_eq!((floor.name.as_str(), wall.name.as_str()), ("floor", "wall"));
+    assert_eq!(floor.probes + wall.probes, 200);
+    assert!(floor.probes > 50 && wall.probes > 50, "{error:?}");
+    for reading in [floor.flat, floor.smooth] {
+        assert!(
+            reading.rms < 1e-12 && reading.energy.abs() < 1e-12,
+            "{floor:?}"
+        );
+    }
+    for reading in [wall.flat, wall.smooth] {
+        assert!((reading.rms - 0.5).abs() < 1e-12, "{wall:?}");
+        assert!((reading.energy - 0.5).abs() < 1e-12, "{wall:?}");
+    }
+    assert!(floor.smooth_share.abs() < 1e-12 && (wall.smooth_share - 1.0).abs() < 1e-12);
+    // The whole scene's RMS weighs each object by its probes.
+    let expected = (wall.probes as f64 / 200.0).sqrt() * 0.5;
+    assert!((error.smooth.rms - expected).abs() < 1e-12, "{error:?}");
+}
+
+#[test]
 fn probes_go_only_where_the_error_is_measured_not_on_emitters() {
     // A sky nine times the floor's area: every probe still lands on the floor.
     let mut scene = solver::Scene::default();

@@ -86,7 +86,7 @@ impl SolveCommand {
                     t.stopped
                 );
             }
-            if let Some(e) = measured {
+            if let Some(e) = &measured {
                 println!(
                     "error       smooth RMS {:.4}, max {:.3}, energy {:+.4}; flat RMS {:.4}  ({} probes, reference noise {:.4})",
                     e.smooth.rms,
@@ -96,6 +96,17 @@ impl SolveCommand {
                     e.probes,
                     e.reference_noise
                 );
+                for o in &e.objects {
+                    println!(
+                        "  {:<20} smooth RMS {:.4}, energy {:+.4}; flat RMS {:.4}  ({} probes, {:.0}% of the squared error)",
+                        o.name,
+                        o.smooth.rms,
+                        o.smooth.energy,
+                        o.flat.rms,
+                        o.probes,
+                        100.0 * o.smooth_share
+                    );
+                }
             }
         }
         Ok(())

@@ -26,7 +26,7 @@ pub struct ErrorStats {
 }
 
 /// A solution's error at the probes.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SolutionError {
     /// Probes that counted (on non-emitting faces).
     pub probes: usize,
@@ -36,6 +36,25 @@ pub struct SolutionError {
     pub smooth: ErrorStats,
     /// The reference's own relative RMS standard error: the floor under `rms`.
     pub reference_noise: f64,
+    /// The same readings object by object (those with counted probes, in scene order): where
+    /// the error is.
+    pub objects: Vec<ObjectError>,
+}
+
+/// One object's share of a solution's error.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ObjectError {
+    /// The object's name in the scene file.
+    pub name: String,
+    /// Probes on its faces that counted.
+    pub probes: usize,
+    /// Its own patch-value errors, relative to its own reference values.
+    pub flat: ErrorStats,
+    /// Its own interpolated-value errors, relative to its own reference values.
+    pub smooth: ErrorStats,
+    /// Its part of the whole scene's squared smooth error (the parts sum to one), so the
+    /// object to work on is the one with the largest.
+    pub smooth_share: f64,
 }
 
 /// Where a probe falls: its patch and the smooth value there.
@@ -86,7 +105,7 @@ fn face_ranges(scene: &Scene, mesh: &Mesh) -> Vec<Range<usize>> {
 /// The errors of (solution, reference) `pairs`.
 pub(crate) fn stats(pairs: &[(Rgb, Rgb)]) -> ErrorStats {
     let reference_sq: f64 = pairs.iter().map(|(_, r)| r.length_squared()).sum();
-    let error_sq: f64 = pairs.iter().map(|(e, r)| (*e - *r).length_squared()).sum();
+    let error_sq = squared_error(pairs);
     let reference_rms = (reference_sq / pairs.len().max(1) as f64).sqrt();
     let largest = pairs
         .iter()
@@ -114,6 +133,8 @@ pub(crate) struct Readings {
     pub(crate) flat: Vec<(Rgb, Rgb)>,
     pub(crate) smooth: Vec<(Rgb, Rgb)>,
     pub(crate) variance: Vec<f64>,
+    /// The object each probe lies on.
+    pub(crate) objects: Vec<u32>,
 }
 
 /// Measures a solution on `mesh` (built from `scene`) at the probes: `radiosity` per patch for
@@ -131,7 +152,13 @@ pub fn evaluate(
         flat: stats(&readings.flat),
         smooth: stats(&readings.smooth),
         reference_noise: readings.noise(),
+        objects: readings.by_object(scene),
     }
+}
+
+/// Squared error of (solution, reference) `pairs`.
+fn squared_error(pairs: &[(Rgb, Rgb)]) -> f64 {
+    pairs.iter().map(|(e, r)| (*e - *r).length_squared()).sum()
 }
 
 impl Readings {
@@ -145,6 +172,32 @@ impl Readings {
             0.0
         }
     }
+
+    /// The readings split by the object each probe lies on.
+    fn by_object(&self, scene: &Scene) -> Vec<ObjectError> {
+        let total = squared_error(&self.smooth);
+        let ratio = |x: f64, y: f64| if y > 0.0 { x / y } else { 0.0 };
+        (0..scene.objects.len() as u32)
+            .filter_map(|object| {
+                let on_it = |pairs: &[(Rgb, Rgb)]| -> Vec<(Rgb, Rgb)> {
+                    pairs
+                        .iter()
+                        .zip(&self.objects)
+                        .filter(|(_, o)| **o == object)
+                        .map(|(pair, _)| *pair)
+                        .collect()
+                };
+                let (flat, smooth) = (on_it(&self.flat), on_it(&self.smooth));
+                (!flat.is_empty()).then(|| ObjectError {
+                    name: scene.objects[object as usize].name.clone(),
+                    probes: flat.len(),
+                    flat: stats(&flat),
+                    smooth: stats(&smooth),
+                    smooth_share: ratio(squared_error(&smooth), total),
+                })
+            })
+            .collect()
+    }
 }
 
 /// Both readings of a solution at the probes on non-emitting faces ([`Readings`]).
@@ -157,9 +210,10 @@ pub(crate) fn read_at(
 ) -> Readings {
     let faces = face_ranges(scene, mesh);
     // The pieces of a source face share its material: any of them tells whether it emits.
-    let mut source_emits = vec![None; faces.len()];
+    let (mut source_emits, mut source_object) = (vec![None; faces.len()], vec![0; faces.len()]);
     for face in &scene.faces {
         source_emits[face.source as usize] = Some(face.emission != Rgb::ZERO);
+        source_object[face.source as usize] = face.object;
     }
     let counted: Vec<&Probe> = probes
         .iter()
@@ -178,6 +232,10 @@ pub(crate) fn read_at(
         variance: counted
             .iter()
             .map(|p| Rgb::from(p.standard_error).length_squared())
+            .collect(),
+        objects: counted
+            .iter()
+            .map(|p| source_object[p.face as usize])
             .collect(),
     }
 }
