@@ -173,28 +173,25 @@ impl Readings {
         }
     }
 
-    /// The readings split by the object each probe lies on.
+    /// The readings split by the object each probe lies on, in one pass over the probes.
     fn by_object(&self, scene: &Scene) -> Vec<ObjectError> {
         let total = squared_error(&self.smooth);
         let ratio = |x: f64, y: f64| if y > 0.0 { x / y } else { 0.0 };
-        (0..scene.objects.len() as u32)
-            .filter_map(|object| {
-                let on_it = |pairs: &[(Rgb, Rgb)]| -> Vec<(Rgb, Rgb)> {
-                    pairs
-                        .iter()
-                        .zip(&self.objects)
-                        .filter(|(_, o)| **o == object)
-                        .map(|(pair, _)| *pair)
-                        .collect()
-                };
-                let (flat, smooth) = (on_it(&self.flat), on_it(&self.smooth));
-                (!flat.is_empty()).then(|| ObjectError {
-                    name: scene.objects[object as usize].name.clone(),
-                    probes: flat.len(),
-                    flat: stats(&flat),
-                    smooth: stats(&smooth),
-                    smooth_share: ratio(squared_error(&smooth), total),
-                })
+        let mut on = vec![(Vec::new(), Vec::new()); scene.objects.len()];
+        for ((flat, smooth), &object) in self.flat.iter().zip(&self.smooth).zip(&self.objects) {
+            let (flats, smooths) = &mut on[object as usize];
+            flats.push(*flat);
+            smooths.push(*smooth);
+        }
+        on.iter()
+            .zip(&scene.objects)
+            .filter(|((flat, _), _)| !flat.is_empty())
+            .map(|((flat, smooth), object)| ObjectError {
+                name: object.name.clone(),
+                probes: flat.len(),
+                flat: stats(flat),
+                smooth: stats(smooth),
+                smooth_share: ratio(squared_error(smooth), total),
             })
             .collect()
     }
