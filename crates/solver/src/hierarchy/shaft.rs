@@ -7,11 +7,17 @@ use crate::geometry::{Polygon, bounds};
 use crate::mesh::Patch;
 use glam::DVec3;
 
+/// Nodes a walk of the cluster tree holds at once: a depth-first walk of a binary tree holds
+/// at most one node a level plus one, and the cluster tree halves its faces at each level
+/// ([`Tree::over`]), so over at most 2^32 faces (`u32` indices) it is at most 33 deep.
+const WALK_DEPTH: usize = 64;
+
 /// Faces in a shaft tested as a single blocker before rays decide.
 pub(super) const MAX_BLOCKER_CANDIDATES: usize = 4;
 
 /// The convex hull of two boxes as their union box cut by up to 12 planes through matching
-/// edges (Haines, Wallace 1994): a point is outside when `normal . p > offset` for a plane.
+/// edges (Haines, Wallace 1994): a point is outside when `normal . p > offset` for a plane,
+/// each offset already widened by the margin.
 struct Shaft {
     union: Bounds,
     planes: [(DVec3, f64); 12],
@@ -67,7 +73,9 @@ impl Shaft {
                         if towards_corner < 0.0 {
                             normal = -normal;
                         }
-                        shaft.planes[shaft.count] = (normal, normal[i] * pa.0 + normal[j] * pa.1);
+                        let offset = normal[i] * pa.0 + normal[j] * pa.1;
+                        shaft.planes[shaft.count] =
+                            (normal, offset + shaft.margin * normal.length());
                         shaft.count += 1;
                     }
                 }
@@ -84,7 +92,7 @@ impl Shaft {
         }
         self.planes[..self.count].iter().all(|(normal, offset)| {
             let nearest = DVec3::select(normal.cmpgt(DVec3::ZERO), lo, hi);
-            normal.dot(nearest) <= offset + m * normal.length()
+            normal.dot(nearest) <= *offset
         })
     }
 
@@ -98,11 +106,9 @@ impl Shaft {
                 return false;
             }
         }
-        self.planes[..self.count].iter().all(|(normal, offset)| {
-            points
-                .iter()
-                .any(|p| normal.dot(*p) <= offset + m * normal.length())
-        })
+        self.planes[..self.count]
+            .iter()
+            .all(|(normal, offset)| points.iter().any(|p| normal.dot(*p) <= *offset))
     }
 }
 
@@ -166,14 +172,21 @@ pub(super) fn shaft_visibility(tree: &Tree, p: &Patch, q: &Patch) -> Visibility 
     let (cp, cq) = (p.polygon.corners(), q.polygon.corners());
     let shaft = Shaft::new(bounds(cp.iter().copied()), bounds(cq.iter().copied()));
     let mut candidates = 0;
-    let mut stack = vec![0u32];
-    while let Some(n) = stack.pop() {
+    // On the stack, no allocation: this runs for every pair refinement decides.
+    let mut stack = [0u32; WALK_DEPTH];
+    let mut depth = 1;
+    while depth > 0 {
+        depth -= 1;
+        let n = stack[depth];
         let node = &tree.nodes[n as usize];
         if !shaft.may_meet_box(node.bounds) {
             continue;
         }
         let Some(element) = &node.element else {
-            stack.extend(node.children());
+            for child in node.children() {
+                stack[depth] = child;
+                depth += 1;
+            }
             continue;
         };
         // An input face (the search never goes below them).
