@@ -29,7 +29,7 @@ const NEAR_FIELD_RADII: f64 = 8.0;
 /// Cells of a near-pair quadrature are about `1 / QUADRATURE_DENSITY` of the gap they look across.
 const QUADRATURE_DENSITY: f64 = 1.5;
 /// The finest rule for one pair (`4 * 6^2` points on a quad), reached by touching patches.
-const MAX_PAIR_LEVEL: u32 = 6;
+pub const MAX_PAIR_LEVEL: u32 = 6;
 
 /// The quadrature level (see [`Polygon::for_each_quadrature_point`]) receiver `p` needs for
 /// source `q`: `None` in the far field (the centroid serves), else finer the smaller the gap
@@ -48,6 +48,15 @@ pub fn near_pair_level(p: &Patch, q: &Patch) -> Option<u32> {
         ((QUADRATURE_DENSITY * p.radius / gap).ceil() as u32).clamp(1, MAX_PAIR_LEVEL)
     };
     Some(level)
+}
+
+/// Whether every point of source `q` (by its bounding sphere) lies at least
+/// [`NEAR_FIELD_RADII`] of receiver `p`'s radii from `p`'s centroid: there the factor from
+/// `p`'s points to `q` is linear over `p` to within `(radius / distance)^2` of itself. (A
+/// large source whose centroid is far can still pass close by: [`near_pair_level`] looks at
+/// the centroid, for patches of one size.)
+pub fn wholly_in_far_field(p: &Patch, q: &Patch) -> bool {
+    p.centroid.distance(q.centroid) - q.radius >= NEAR_FIELD_RADII * p.radius
 }
 
 /// Shadow rays between two patches: more for pairs that are near against their size, where

@@ -6,11 +6,11 @@
 use super::Hierarchy;
 use super::shaft::{Visibility, shaft_visibility};
 use super::tree::{Bounds, Element, Node, SurfacePoint};
-use crate::geometry::point_to_polygon_form_factor;
+use crate::geometry::{Polygon, point_to_polygon_form_factor};
 use crate::mesh::Patch;
 use crate::pair::{
     FormFactorSettings, facing_kernel, mutually_facing, near_pair_level, rays_for_pair,
-    unoccluded_form_factor,
+    unoccluded_form_factor, wholly_in_far_field,
 };
 use crate::sampling::{pair_seed, splitmix64, stratified_uv, unit_interval};
 use crate::visibility::Occluders;
@@ -130,9 +130,15 @@ impl<'a> LinkFactors<'a> {
                 factor += weight * f;
                 extend(f);
             });
-            p.polygon.corners().iter().for_each(|c| extend(at(*c)));
-            extend(at(p.centroid));
-            extend(at(nearest_in_front(p, q)));
+            if !wholly_in_far_field(p, q) {
+                p.polygon.corners().iter().for_each(|c| extend(at(*c)));
+                extend(at(p.centroid));
+                extend(at(nearest_in_front(p, q)));
+            } else {
+                // In the far field the factor is linear over the receiver to within (radius /
+                // distance)^2: its spread is the Gauss points' stretched out to the corners.
+                high = low + (high - low) * gauss_to_corner_span(&p.polygon);
+            }
             let visibility = shaft_visibility(&self.hierarchy.tree, p, q);
             if visibility != Visibility::Partial {
                 self.shaft_decided.fetch_add(1, Ordering::Relaxed);
@@ -214,7 +220,17 @@ impl<'a> LinkFactors<'a> {
     }
 
     /// The factor a kept link carries, visibility included (measured, where partly hidden).
-    pub(super) fn factor(&self, receiver: u32, source: u32, estimate: &Estimate) -> f64 {
+    /// Between elements in view of each other the receiver's quadrature is refined (levels 1,
+    /// 2, 4, ... up to the one [`integration_level`] allows) until two successive levels agree
+    /// within `allowed`, the factor error the link can afford: near pairs stop as soon as their
+    /// factor is as accurate as the knob asks, instead of all taking the finest rule.
+    pub(super) fn factor(
+        &self,
+        receiver: u32,
+        source: u32,
+        estimate: &Estimate,
+        allowed: f64,
+    ) -> f64 {
         let (r, s) = (self.node(receiver), self.node(source));
         let (Some(er), Some(es)) = (&r.element, &s.element) else {
             return self.sampled_factor(
@@ -227,10 +243,21 @@ impl<'a> LinkFactors<'a> {
         if estimate.visibility == Visibility::Partial {
             return estimate.factor;
         }
-        match integration_level(p, q, estimate.factor, estimate.spread) {
-            1 => estimate.factor,
-            level => unoccluded_form_factor(p, q, level),
+        let finest = integration_level(p, q, estimate.factor, estimate.spread);
+        let (mut level, mut factor) = (1, estimate.factor);
+        while level < finest {
+            let finer = (2 * level).min(finest);
+            let refined = unoccluded_form_factor(p, q, finer);
+            // The difference between successive rules as the coarser one's error (the
+            // embedded-rule estimate of adaptive quadrature), kept conservative by returning
+            // the finer value.
+            let settled = (refined - factor).abs() <= allowed;
+            (level, factor) = (finer, refined);
+            if settled {
+                break;
+            }
         }
+        factor
     }
 
     /// The factor of a partly hidden pair (see [`PartlyHidden`]): at each receiver
@@ -405,6 +432,14 @@ fn nearest_in_front(p: &Patch, q: &Patch) -> DVec3 {
         .closest_point(nearest + toward_front.normalize_or_zero() * (1e-3 * p.radius))
 }
 
+/// How much farther from the centroid a polygon's corners lie than its level-1 quadrature
+/// points: the factor a linear function's spread over the points grows by at the corners
+/// (Gauss points at `1/2 +- 1/(2 sqrt 3)` of a quad's sides; Strang-Fix points halfway from a
+/// triangle's centroid to its corners).
+fn gauss_to_corner_span(polygon: &Polygon) -> f64 {
+    if polygon.is_quad() { 3f64.sqrt() } else { 2.0 }
+}
+
 /// The receiver quadrature level for the factor between elements `p` and `q`: the dense
 /// path's near-field rule, and at least 3 when the factor varies over the receiver more than its
 /// four-point mean (a source seen from only part of the receiver, which those points can miss).
@@ -417,6 +452,7 @@ fn integration_level(p: &Patch, q: &Patch, mean: f64, spread: f64) -> u32 {
 mod tests {
     use super::*;
     use crate::hierarchy::fixtures::{GREY, add_parallelogram, screened_lamp};
+    use crate::pair::MAX_PAIR_LEVEL;
     use crate::scene::{Material, Rgb, Scene};
     use glam::dvec3;
 
@@ -465,6 +501,78 @@ mod tests {
         let measured = factors.measure_visibility(floor, lamp, copy, rays);
         let (cast, _) = factors.into_counts();
         (unoccluded, measured, cast)
+    }
+
+    #[test]
+    fn a_near_factor_is_integrated_until_it_is_as_accurate_as_the_link_can_afford() {
+        // A 0.2 x 0.2 square 0.1 above a unit floor, facing it: the factor peaks under the
+        // square, between the floor's four Gauss points. By reciprocity the exact factor is the
+        // square's area over the floor's times the mean of its points' factors onto the floor.
+        let mut scene = Scene::default();
+        let (x, y) = (DVec3::X, DVec3::Y);
+        add_parallelogram(&mut scene, "floor", (DVec3::ZERO, x, y), GREY);
+        add_parallelogram(
+            &mut scene,
+            "tile",
+            (dvec3(0.3, 0.3, 0.1), y * 0.2, x * 0.2),
+            GREY,
+        );
+        let hierarchy = Hierarchy::cluster_tree(&scene);
+        let occluders = Occluders::new(&scene);
+        let factors = LinkFactors::new(&hierarchy, &occluders, FormFactorSettings::default());
+        let (floor, tile) = (hierarchy.tree.face_node[0], hierarchy.tree.face_node[1]);
+        let (p, q) = (
+            hierarchy.tree.element_patch(floor),
+            hierarchy.tree.element_patch(tile),
+        );
+        let exact = q.area / p.area * unoccluded_form_factor(q, p, 12);
+        let estimate = factors.estimate(floor, tile).expect("they face each other");
+        assert!(estimate.visibility == Visibility::Clear);
+        assert!(
+            (estimate.factor / exact - 1.0).abs() > 0.1,
+            "{}",
+            estimate.factor
+        );
+        // None allowed gives the finest rule; each allowance is met.
+        let finest = unoccluded_form_factor(p, q, MAX_PAIR_LEVEL);
+        assert_eq!(factors.factor(floor, tile, &estimate, 0.0), finest);
+        for share in [0.2, 0.05, 0.01] {
+            let allowed = share * exact;
+            let factor = factors.factor(floor, tile, &estimate, allowed);
+            assert!((factor - exact).abs() <= allowed, "{factor} at {allowed}");
+        }
+    }
+
+    #[test]
+    fn a_far_source_spreads_over_the_receiver_as_its_corners_see_it() {
+        // A unit square 10 above and 3 aside of the receiver: the factor's spread over the
+        // receiver, from its four Gauss points stretched to the corners, is the spread of the
+        // exact factor at the corners to within the source's radius over the distance.
+        let hierarchy = facing_squares(10.0, 3.0);
+        let (p, q) = (
+            hierarchy.tree.element_patch(hierarchy.tree.face_node[0]),
+            hierarchy.tree.element_patch(hierarchy.tree.face_node[1]),
+        );
+        assert!(wholly_in_far_field(p, q));
+        let at_corners: Vec<f64> = p
+            .polygon
+            .corners()
+            .iter()
+            .map(|c| point_to_polygon_form_factor(*c, p.normal, &q.polygon, q.normal))
+            .collect();
+        let exact = at_corners.iter().fold(0.0f64, |a, &f| a.max(f))
+            - at_corners.iter().fold(f64::INFINITY, |a, &f| a.min(f));
+        let occluders = Occluders::new(&Scene::default());
+        let factors = LinkFactors::new(&hierarchy, &occluders, FormFactorSettings::default());
+        let estimate = factors
+            .estimate(hierarchy.tree.face_node[0], hierarchy.tree.face_node[1])
+            .expect("they face each other");
+        let relative = q.radius / p.centroid.distance(q.centroid);
+        assert!(
+            (estimate.spread / exact - 1.0).abs() < relative,
+            "{} against {exact}",
+            estimate.spread
+        );
     }
 
     #[test]

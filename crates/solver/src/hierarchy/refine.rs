@@ -273,7 +273,10 @@ impl Decider<'_> {
             Some(End::Source) => return Decision::SplitSource(excess),
             None => {}
         }
-        let factor = self.factors.factor(receiver, source, &estimate);
+        // A quarter of the link's error budget for its factor's quadrature: `rho_R B_S dF`.
+        let (radiosity, _) = self.sources.at(source);
+        let allowed = QUADRATURE_SHARE * self.target.tolerance / (r.reflectance * radiosity);
+        let factor = self.factors.factor(receiver, source, &estimate, allowed);
         if factor <= 0.0 {
             return Decision::Drop;
         }
@@ -299,6 +302,9 @@ impl Decider<'_> {
         })
     }
 }
+
+/// The share of a link's error budget (the tolerance) its factor's quadrature may use.
+const QUADRATURE_SHARE: f64 = 0.25;
 
 /// Slices a generation of pairs is decided in while the link budget can abandon it.
 const GENERATION_SLICES: usize = 16;
