@@ -3,9 +3,9 @@
 //! cannot decide visibility, and sampled from the cluster's side, onto the receiving element,
 //! where a cluster sends.
 
-use super::Hierarchy;
 use super::shaft::{Visibility, shaft_visibility};
 use super::tree::{Bounds, Element, Node, SurfacePoint};
+use super::{Hierarchy, Pair};
 use crate::geometry::{Polygon, point_to_polygon_form_factor};
 use crate::mesh::Patch;
 use crate::pair::{
@@ -111,8 +111,8 @@ impl<'a> LinkFactors<'a> {
     /// The factor of a pair before refinement decides, with its spread over the receiver
     /// and how the shaft saw it (unoccluded where partly hidden: no rays yet); `None` when no
     /// light can pass between them.
-    pub(super) fn estimate(&self, receiver: u32, source: u32) -> Option<Estimate> {
-        let (r, s) = (self.node(receiver), self.node(source));
+    pub(super) fn estimate(&self, pair: Pair) -> Option<Estimate> {
+        let (r, s) = (self.node(pair.receiver), self.node(pair.source));
         if let (Some(er), Some(es)) = (&r.element, &s.element) {
             let (p, q) = (&er.patch, &es.patch);
             if p.face == q.face || !mutually_facing(p, q) {
@@ -149,7 +149,10 @@ impl<'a> LinkFactors<'a> {
                     + (high - low) * gauss_to_corner_span(&p.polygon)
                     + 2.0 * high * (p.radius / gap).powi(2);
             }
-            let visibility = shaft_visibility(&self.hierarchy.tree, p, q);
+            let visibility = match pair.clear {
+                true => Visibility::Clear,
+                false => shaft_visibility(&self.hierarchy.tree, p, q),
+            };
             if visibility != Visibility::Partial {
                 self.shaft_decided.fetch_add(1, Ordering::Relaxed);
             }
@@ -511,7 +514,9 @@ mod tests {
         let occluders = Occluders::new(&scene);
         let factors = LinkFactors::new(&hierarchy, &occluders, FormFactorSettings::default());
         let (floor, lamp) = (hierarchy.tree.face_node[0], hierarchy.tree.face_node[1]);
-        let unoccluded = factors.estimate(floor, lamp).expect("they face each other");
+        let unoccluded = factors
+            .estimate(Pair::new(floor, lamp))
+            .expect("they face each other");
         let copy = Estimate {
             visibility: Visibility::Partial,
             centroid: None,
@@ -545,7 +550,9 @@ mod tests {
             hierarchy.tree.element_patch(tile),
         );
         let exact = q.area / p.area * unoccluded_form_factor(q, p, 12);
-        let estimate = factors.estimate(floor, tile).expect("they face each other");
+        let estimate = factors
+            .estimate(Pair::new(floor, tile))
+            .expect("they face each other");
         assert!(estimate.visibility == Visibility::Clear);
         assert!(
             (estimate.factor / exact - 1.0).abs() > 0.1,
@@ -589,7 +596,9 @@ mod tests {
                 .fold((f64::INFINITY, 0.0f64), |(l, h), &f| (l.min(f), h.max(f)));
             let occluders = Occluders::new(&Scene::default());
             let factors = LinkFactors::new(&hierarchy, &occluders, FormFactorSettings::default());
-            let estimate = factors.estimate(receiver, source).expect("facing");
+            let estimate = factors
+                .estimate(Pair::new(receiver, source))
+                .expect("facing");
             let distance = p.centroid.distance(q.centroid);
             let (linear, curvature) = (
                 q.radius / distance,

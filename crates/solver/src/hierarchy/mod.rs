@@ -123,6 +123,27 @@ struct Link {
     offset: [f32; 2],
 }
 
+/// A pair refinement decides: may `receiver` gather from `source`, and through which link.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Pair {
+    receiver: u32,
+    source: u32,
+    /// A shaft between elements holding these two found no face that could block a segment
+    /// between them; pieces of a planar element lie within it, so none can block theirs.
+    clear: bool,
+}
+
+impl Pair {
+    /// A pair whose visibility nothing has shown yet.
+    fn new(receiver: u32, source: u32) -> Pair {
+        Pair {
+            receiver,
+            source,
+            clear: false,
+        }
+    }
+}
+
 /// What refinement and solving cost.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct HierarchyStats {
@@ -134,7 +155,8 @@ pub struct HierarchyStats {
     pub clusters: usize,
     /// Refinement-and-solve rounds run.
     pub rounds: usize,
-    /// Links whose visibility the shaft decided without rays (clear or hidden).
+    /// Links whose visibility a shaft decided without rays (clear or hidden; clear too where
+    /// the pair's parent was).
     pub shaft_decided: u64,
     /// Shadow rays cast.
     #[serde(skip)]
@@ -417,7 +439,7 @@ impl<'a> Rounds<'a> {
         let mut pending = if hierarchy.tree.nodes.is_empty() || resumed {
             Vec::new()
         } else {
-            vec![(0, 0)]
+            vec![Pair::new(0, 0)]
         };
         for round in 0..self.max_rounds.max(1) {
             // Past the link budget no pair splits: another round could change no link.

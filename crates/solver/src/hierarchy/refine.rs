@@ -5,7 +5,7 @@
 use super::factor::{Estimate, LinkFactors, Rays, kernel_centre, tangent_coordinates};
 use super::shaft::Visibility;
 use super::tree::{ELEMENT_CHILDREN, MAX_DEPTH, Node};
-use super::{Hierarchy, Link};
+use super::{Hierarchy, Link, Pair};
 use crate::pair::FormFactorSettings;
 use crate::sampling::pair_seed;
 use crate::scene::Rgb;
@@ -20,8 +20,13 @@ use rayon::prelude::*;
 enum Decision {
     Drop,
     Keep(Link),
-    SplitReceiver(f32),
-    SplitSource(f32),
+    /// Split one end: the link's error over the tolerance (`excess`); whether the pair's
+    /// shaft was clear, which its children's pairs inherit.
+    Split {
+        end: End,
+        excess: f32,
+        clear: bool,
+    },
     /// A cluster's self-link: every pair of its children.
     SplitBoth,
 }
@@ -31,6 +36,30 @@ enum Decision {
 enum End {
     Receiver,
     Source,
+}
+
+impl Pair {
+    /// The node at `end`.
+    fn at(self, end: End) -> u32 {
+        match end {
+            End::Receiver => self.receiver,
+            End::Source => self.source,
+        }
+    }
+
+    /// This pair with `node` at `end` instead.
+    fn with(self, end: End, node: u32) -> Pair {
+        match end {
+            End::Receiver => Pair {
+                receiver: node,
+                ..self
+            },
+            End::Source => Pair {
+                source: node,
+                ..self
+            },
+        }
+    }
 }
 
 /// Per node, what it sends as refinement sees it: the largest channel of its mean radiosity
@@ -188,9 +217,7 @@ impl Decision {
     /// error is within that many tolerances (never, for a forced split).
     fn kept_when_coarser_by(&self, factor: f64) -> bool {
         match *self {
-            Decision::SplitReceiver(excess) | Decision::SplitSource(excess) => {
-                excess.is_finite() && excess as f64 <= factor
-            }
+            Decision::Split { excess, .. } => excess.is_finite() && excess as f64 <= factor,
             Decision::Keep(_) | Decision::Drop | Decision::SplitBoth => false,
         }
     }
@@ -225,7 +252,11 @@ impl Decider<'_> {
             && unoccluded.end_to_split(r, s, &self.target) == Some(End::Receiver)
         {
             let excess = (unoccluded.receiver + unoccluded.source) / tolerance;
-            return Err(Decision::SplitReceiver(excess as f32));
+            return Err(Decision::Split {
+                end: End::Receiver,
+                excess: excess as f32,
+                clear: false,
+            });
         }
         let widest = LinkErrors::new(r, self.sources.at(source), factor, estimate.spread + factor);
         if widest.receiver + widest.source > tolerance {
@@ -234,8 +265,9 @@ impl Decider<'_> {
         Ok(Rays::ForFactor)
     }
 
-    /// Keep, drop or split the link from `source` to `receiver`.
-    fn decide(&self, receiver: u32, source: u32) -> Decision {
+    /// Keep, drop or split the link from `pair.source` to `pair.receiver`.
+    fn decide(&self, pair: Pair) -> Decision {
+        let (receiver, source) = (pair.receiver, pair.source);
         let (r, s) = (self.factors.node(receiver), self.factors.node(source));
         if receiver == source {
             return if r.element.is_none() {
@@ -249,9 +281,13 @@ impl Decider<'_> {
         // through a wall whose two sides share a cluster). Links end at elements, and clusters
         // only send.
         if r.element.is_none() {
-            return Decision::SplitReceiver(f32::INFINITY);
+            return Decision::Split {
+                end: End::Receiver,
+                excess: f32::INFINITY,
+                clear: false,
+            };
         }
-        let Some(mut estimate) = self.factors.estimate(receiver, source) else {
+        let Some(mut estimate) = self.factors.estimate(pair) else {
             return Decision::Drop;
         };
         match estimate.visibility {
@@ -268,10 +304,9 @@ impl Decider<'_> {
         }
         let errors = LinkErrors::new(r, self.sources.at(source), estimate.factor, estimate.spread);
         let excess = ((errors.receiver + errors.source) / self.target.tolerance) as f32;
-        match errors.end_to_split(r, s, &self.target) {
-            Some(End::Receiver) => return Decision::SplitReceiver(excess),
-            Some(End::Source) => return Decision::SplitSource(excess),
-            None => {}
+        if let Some(end) = errors.end_to_split(r, s, &self.target) {
+            let clear = estimate.visibility == Visibility::Clear;
+            return Decision::Split { end, excess, clear };
         }
         // A quarter of the link's error budget for its factor's quadrature: `rho_R B_S dF`.
         let (radiosity, _) = self.sources.at(source);
@@ -324,7 +359,7 @@ impl Hierarchy {
         target: &mut Fineness,
         occluders: &Occluders,
         rays: FormFactorSettings,
-        mut pending: Vec<(u32, u32)>,
+        mut pending: Vec<Pair>,
         run: &mut Pass,
     ) {
         while !pending.is_empty() {
@@ -361,7 +396,7 @@ impl Hierarchy {
     /// knob made for the first pairs, which the next call at a coarser knob starts from).
     fn decide_generation(
         &mut self,
-        (pending, earlier): (&[(u32, u32)], &mut Vec<Decision>),
+        (pending, earlier): (&[Pair], &mut Vec<Decision>),
         sources: &NodeRadiosity,
         target: &Fineness,
         occluders: &Occluders,
@@ -374,7 +409,7 @@ impl Hierarchy {
             true => f64::INFINITY,
             false => target.tolerance,
         };
-        let decide = |this: &mut Hierarchy, pairs: &[(u32, u32)], frozen: bool| {
+        let decide = |this: &mut Hierarchy, pairs: &[Pair], frozen: bool| {
             let refiner = Decider {
                 factors: LinkFactors::new(this, occluders, rays),
                 sources,
@@ -383,10 +418,8 @@ impl Hierarchy {
                     ..target.frozen_if(frozen)
                 },
             };
-            let decisions: Vec<Decision> = pairs
-                .par_iter()
-                .map(|&(r, s)| refiner.decide(r, s))
-                .collect();
+            let decisions: Vec<Decision> =
+                pairs.par_iter().map(|&pair| refiner.decide(pair)).collect();
             let (cast, decided) = refiner.factors.into_counts();
             this.stats.rays += cast;
             this.stats.shaft_decided += decided;
@@ -410,8 +443,8 @@ impl Hierarchy {
         for pairs in pending.chunks(slice) {
             let decided =
                 decide_unless_known(pairs, &mut reading, |open| decide(self, open, frozen));
-            for (&(r, s), decision) in pairs.iter().zip(&decided) {
-                let (now, coarser) = self.pairs_made(r, s, decision);
+            for (&pair, decision) in pairs.iter().zip(&decided) {
+                let (now, coarser) = self.pairs_made(pair, decision);
                 (made, fewest) = (made + now, fewest + coarser);
             }
             decisions.extend(decided);
@@ -443,7 +476,7 @@ impl Hierarchy {
             return Err((Limit::Leaves(budget.max_leaves), Jump::Overshoot(overshoot)));
         }
         // Over budget: the pairs that asked for element splits decide again without them.
-        let pairs: Vec<(u32, u32)> = splits.iter().map(|&i| pending[i]).collect();
+        let pairs: Vec<Pair> = splits.iter().map(|&i| pending[i]).collect();
         let again = decide(self, &pairs, true);
         splits
             .iter()
@@ -457,29 +490,30 @@ impl Hierarchy {
     /// (`sources` follows the new children); returns the pairs the next generation decides.
     fn next_generation(
         &mut self,
-        pending: Vec<(u32, u32)>,
+        pending: Vec<Pair>,
         decisions: Vec<Decision>,
         sources: &mut NodeRadiosity,
-    ) -> Vec<(u32, u32)> {
+    ) -> Vec<Pair> {
         let mut next = Vec::new();
-        for ((r, s), decision) in pending.into_iter().zip(decisions) {
+        for (pair, decision) in pending.into_iter().zip(decisions) {
             match decision {
                 Decision::Drop => {}
                 Decision::Keep(link) => self.links.push(link),
-                Decision::SplitReceiver(_) => {
-                    self.split_for(r, sources);
-                    next.extend(self.tree.nodes[r as usize].children().map(|c| (c, s)));
-                }
-                Decision::SplitSource(_) => {
-                    self.split_for(s, sources);
-                    next.extend(self.tree.nodes[s as usize].children().map(|c| (r, c)));
+                Decision::Split { end, clear, .. } => {
+                    let n = pair.at(end);
+                    self.split_for(n, sources);
+                    let children = self.tree.nodes[n as usize].children();
+                    next.extend(children.map(|c| Pair {
+                        clear,
+                        ..pair.with(end, c)
+                    }));
                 }
                 Decision::SplitBoth => {
-                    let children = self.tree.nodes[r as usize].children();
+                    let children = self.tree.nodes[pair.receiver as usize].children();
                     next.extend(
                         children
                             .clone()
-                            .flat_map(|a| children.clone().map(move |b| (a, b))),
+                            .flat_map(|a| children.clone().map(move |b| Pair::new(a, b))),
                     );
                 }
             }
@@ -493,7 +527,7 @@ impl Hierarchy {
         &mut self,
         sources: &NodeRadiosity,
         target: &Fineness,
-    ) -> Vec<(u32, u32)> {
+    ) -> Vec<Pair> {
         let node = |n: u32| &self.tree.nodes[n as usize];
         let target = target.frozen_if(self.stats.leaf_budget_reached);
         let (redo, keep): (Vec<Link>, Vec<Link>) = self.links.par_iter().partition(|l| {
@@ -505,13 +539,15 @@ impl Hierarchy {
         if !redo.is_empty() {
             self.links = keep;
         }
-        redo.iter().map(|l| (l.receiver, l.source)).collect()
+        redo.iter()
+            .map(|l| Pair::new(l.receiver, l.source))
+            .collect()
     }
 
     /// The links or pairs `decision` on pair `(r, s)` makes: one kept link, or the pairs of
     /// the split end's children; and the fewest it would make at any coarser knob (one link,
     /// unless the split is forced, as a cluster that receives always splits).
-    fn pairs_made(&self, r: u32, s: u32, decision: &Decision) -> (usize, usize) {
+    fn pairs_made(&self, pair: Pair, decision: &Decision) -> (usize, usize) {
         let children = |n: u32| match self.tree.is_unsplit_element(n) {
             true => ELEMENT_CHILDREN,
             false => self.tree.nodes[n as usize].child_count as usize,
@@ -519,9 +555,8 @@ impl Hierarchy {
         let now = match decision {
             Decision::Drop => 0,
             Decision::Keep(_) => 1,
-            Decision::SplitReceiver(_) => children(r),
-            Decision::SplitSource(_) => children(s),
-            Decision::SplitBoth => children(r) * children(r),
+            Decision::Split { end, .. } => children(pair.at(*end)),
+            Decision::SplitBoth => children(pair.receiver) * children(pair.receiver),
         };
         match decision.kept_when_coarser_by(f64::INFINITY) {
             true => (now, 1),
@@ -534,7 +569,7 @@ impl Hierarchy {
     /// `max_links`: each split whose error is within that many tolerances kept as one link.
     fn coarsening_to_fit(
         &self,
-        pending: &[(u32, u32)],
+        pending: &[Pair],
         decisions: &[Decision],
         max_links: usize,
         knob: f64,
@@ -545,9 +580,9 @@ impl Hierarchy {
                 .iter()
                 .zip(decisions)
                 .map(
-                    |(&(r, s), decision)| match decision.kept_when_coarser_by(factor) {
+                    |(&pair, decision)| match decision.kept_when_coarser_by(factor) {
                         true => 1,
-                        false => self.pairs_made(r, s, decision).0,
+                        false => self.pairs_made(pair, decision).0,
                     },
                 )
                 .sum()
@@ -563,19 +598,14 @@ impl Hierarchy {
 
     /// Which of `decisions` (for `pending`) split a leaf element, and how many leaves those
     /// splits add.
-    fn element_splits(
-        &self,
-        pending: &[(u32, u32)],
-        decisions: &[Decision],
-    ) -> (Vec<usize>, usize) {
+    fn element_splits(&self, pending: &[Pair], decisions: &[Decision]) -> (Vec<usize>, usize) {
         let mut marked = vec![false; self.tree.nodes.len()];
         let (mut indices, mut added) = (Vec::new(), 0);
-        for (i, (&(r, s), decision)) in pending.iter().zip(decisions).enumerate() {
-            let n = match decision {
-                Decision::SplitReceiver(_) => r,
-                Decision::SplitSource(_) => s,
-                _ => continue,
+        for (i, (pair, decision)) in pending.iter().zip(decisions).enumerate() {
+            let Decision::Split { end, .. } = *decision else {
+                continue;
             };
+            let n = pair.at(end);
             if self.tree.is_unsplit_element(n) {
                 indices.push(i);
                 if !std::mem::replace(&mut marked[n as usize], true) {
@@ -637,9 +667,9 @@ impl Hierarchy {
 /// Decisions on `pairs`: those of `earlier` (read in order, made at a finer knob) that stand
 /// at a coarser one, the rest from `decide`. The buffer of `earlier` is freed once read.
 fn decide_unless_known(
-    pairs: &[(u32, u32)],
+    pairs: &[Pair],
     earlier: &mut std::vec::IntoIter<Decision>,
-    decide: impl FnOnce(&[(u32, u32)]) -> Vec<Decision>,
+    decide: impl FnOnce(&[Pair]) -> Vec<Decision>,
 ) -> Vec<Decision> {
     if earlier.len() == 0 {
         *earlier = Vec::new().into_iter();
@@ -649,7 +679,7 @@ fn decide_unless_known(
         .iter()
         .map(|_| earlier.next().filter(Decision::stands_when_coarser))
         .collect();
-    let open: Vec<(u32, u32)> = (pairs.iter().zip(&known))
+    let open: Vec<Pair> = (pairs.iter().zip(&known))
         .filter(|(_, known)| known.is_none())
         .map(|(&pair, _)| pair)
         .collect();
@@ -747,7 +777,10 @@ mod tests {
                     finest_radius: 0.0,
                 },
             };
-            let estimate = decider.factors.estimate(floor, lamp).expect("facing");
+            let estimate = decider
+                .factors
+                .estimate(Pair::new(floor, lamp))
+                .expect("facing");
             let node = |n: u32| decider.factors.node(n);
             let rays = decider.rays_for(node(floor), node(lamp), lamp, &estimate);
             (rays, estimate, decider.factors.into_counts().0)
@@ -760,7 +793,13 @@ mod tests {
         let widest_error = 0.5 * (estimate.spread + estimate.factor);
         // The kernel alone passes the tolerance: the receiver splits, and no ray is cast.
         let (split, _, cast) = decide_at(0.5 * kernel_error);
-        assert!(matches!(split, Err(Decision::SplitReceiver(_))));
+        assert!(matches!(
+            split,
+            Err(Decision::Split {
+                end: End::Receiver,
+                ..
+            })
+        ));
         assert_eq!(cast, 0);
         // Visibility could pass it: the spread is measured.
         let (measure, _, _) = decide_at(0.5 * (kernel_error + widest_error));
@@ -768,6 +807,68 @@ mod tests {
         // Nothing visibility does could pass it: the factor alone is measured.
         let (factor_only, _, _) = decide_at(2.0 * widest_error);
         assert_eq!(factor_only.ok(), Some(Rays::ForFactor));
+    }
+
+    #[test]
+    fn a_clear_pair_passes_its_shaft_on_to_its_pieces_and_a_blocked_one_does_not() {
+        // A screen 1 above the unit floor covers x < 0.37 there: from the floor's quarters at
+        // x > 0.5 every segment to the lamp 10 above passes it; from those below, some do not.
+        let scene = screened_lamp(1.0, 0.37);
+        let mut hierarchy = Hierarchy::cluster_tree(&scene);
+        let occluders = Occluders::new(&scene);
+        hierarchy.index(&occluders);
+        let (floor, lamp) = (hierarchy.tree.face_node[0], hierarchy.tree.face_node[1]);
+        let leaf_radiosity: Vec<Rgb> = (0..hierarchy.tree.leaves.len())
+            .map(|i| hierarchy.tree.leaf_patch(i).emission)
+            .collect();
+        let sources = hierarchy.node_radiosity(&leaf_radiosity);
+        hierarchy.tree.subdivide(floor);
+        let quarters: Vec<u32> = hierarchy.tree.nodes[floor as usize].children().collect();
+        quarters.iter().for_each(|&q| hierarchy.tree.subdivide(q));
+        let decider = Decider {
+            factors: LinkFactors::new(&hierarchy, &occluders, FormFactorSettings::default()),
+            sources: &sources,
+            target: Fineness {
+                tolerance: 1e-9,
+                smallest: 0.0,
+                finest_radius: 0.0,
+            },
+        };
+        let patch = |n: u32| hierarchy.tree.element_patch(n);
+        let mut clear_quarters = 0;
+        for &quarter in &quarters {
+            let decision = decider.decide(Pair::new(quarter, lamp));
+            let passes_clear = matches!(decision, Decision::Split { clear: true, .. });
+            assert_eq!(passes_clear, patch(quarter).centroid.x > 0.5);
+            if !passes_clear {
+                continue;
+            }
+            clear_quarters += 1;
+            for piece in hierarchy.tree.nodes[quarter as usize].children() {
+                let inherited = Pair {
+                    clear: true,
+                    ..Pair::new(piece, lamp)
+                };
+                let (given, walked) = (
+                    decider.factors.estimate(inherited).expect("facing"),
+                    decider
+                        .factors
+                        .estimate(Pair::new(piece, lamp))
+                        .expect("facing"),
+                );
+                assert!(given.visibility == Visibility::Clear);
+                assert_eq!((given.factor, given.spread), (walked.factor, walked.spread));
+                // What the inherited shaft promises: nothing between any two of their points.
+                let (p, q) = (patch(piece), patch(lamp));
+                for k in 0..64 {
+                    let (u, v) = ((k % 8) as f64 / 7.0, (k / 8) as f64 / 7.0);
+                    let from = p.polygon.point_at(u, v);
+                    let to = q.polygon.point_at(1.0 - v, u);
+                    assert!(occluders.segment_is_clear(from, to, [p.face, q.face]));
+                }
+            }
+        }
+        assert_eq!(clear_quarters, 2);
     }
 
     #[test]
@@ -804,6 +905,11 @@ mod tests {
 
     #[test]
     fn only_the_splits_a_coarser_knob_may_keep_are_decided_again() {
+        let split = |end, excess| Decision::Split {
+            end,
+            excess,
+            clear: false,
+        };
         let link = Link {
             receiver: 1,
             source: 2,
@@ -813,25 +919,28 @@ mod tests {
         };
         let earlier = vec![
             Decision::Keep(link),
-            Decision::SplitReceiver(2.0),
+            split(End::Receiver, 2.0),
             Decision::Drop,
-            Decision::SplitSource(f32::INFINITY),
+            split(End::Source, f32::INFINITY),
         ];
-        let pairs: Vec<(u32, u32)> = (0..6).map(|i| (i, i + 10)).collect();
+        let pairs: Vec<Pair> = (0..6).map(|i| Pair::new(i, i + 10)).collect();
         let mut reading = earlier.into_iter();
         let mut asked = Vec::new();
         let decided = decide_unless_known(&pairs[..4], &mut reading, |open| {
             asked.extend_from_slice(open);
             open.iter().map(|_| Decision::SplitBoth).collect()
         });
-        assert_eq!(asked, [(1, 11)]);
+        assert_eq!(asked, [Pair::new(1, 11)]);
         assert!(matches!(
             decided[..],
             [
                 Decision::Keep(kept),
                 Decision::SplitBoth,
                 Decision::Drop,
-                Decision::SplitSource(f32::INFINITY)
+                Decision::Split {
+                    end: End::Source,
+                    ..
+                }
             ] if kept == link
         ));
         // Past what was decided before, every pair is decided afresh.
