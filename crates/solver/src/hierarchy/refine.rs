@@ -312,7 +312,10 @@ impl Decider<'_> {
         let (radiosity, _) = self.sources.at(source);
         let allowed = QUADRATURE_SHARE * self.target.tolerance / (r.reflectance * radiosity);
         let factor = self.factors.factor(receiver, source, &estimate, allowed);
-        if factor <= 0.0 {
+        // A partly hidden pair whose few rays were all blocked is kept, empty, with the widest
+        // spread: dropped, it could never be measured again when its source brightens, while
+        // the pairs whose rays read high would be, and light would be lost on average.
+        if factor <= 0.0 && estimate.visibility != Visibility::Partial {
             return Decision::Drop;
         }
         let offset = match (&s.element, estimate.visibility) {
