@@ -410,14 +410,14 @@ impl<'a> LinkFactors<'a> {
                 return;
             }
             let mut left = unit_interval(splitmix64(point_seed ^ 0x5EED)) * total;
-            let carrying = candidates.iter().filter(|(_, kernel)| *kernel > 0.0);
+            let mut carrying = candidates.iter().filter(|(_, kernel)| *kernel > 0.0);
             let (y, _) = carrying
                 .clone()
                 .find(|(_, kernel)| {
                     left -= kernel;
                     left < 0.0
                 })
-                .or(carrying.last())
+                .or(carrying.next_back())
                 .expect("a carrying candidate");
             cast += 1;
             measured += weight * unoccluded;

@@ -312,10 +312,7 @@ impl Decider<'_> {
         let (radiosity, _) = self.sources.at(source);
         let allowed = QUADRATURE_SHARE * self.target.tolerance / (r.reflectance * radiosity);
         let factor = self.factors.factor(receiver, source, &estimate, allowed);
-        // A partly hidden pair whose few rays were all blocked is kept, empty, with the widest
-        // spread: dropped, it could never be measured again when its source brightens, while
-        // the pairs whose rays read high would be, and light would be lost on average.
-        if factor <= 0.0 && estimate.visibility != Visibility::Partial {
+        if factor <= 0.0 {
             return Decision::Drop;
         }
         let offset = match (&s.element, estimate.visibility) {
