@@ -756,17 +756,23 @@ mod tests {
     use crate::scene::{Material, Scene};
     use glam::{DVec3, dvec3};
 
-    #[test]
-    fn a_partly_hidden_pair_gets_rays_only_where_they_can_change_its_decision() {
-        let scene = screened_lamp(0.01, 0.37);
+    /// The indexed hierarchy of `scene`, its occluders, and what its nodes send when only the
+    /// emitters shine.
+    fn lit_by_emission(scene: Scene) -> (Hierarchy, Occluders, NodeRadiosity) {
         let mut hierarchy = Hierarchy::cluster_tree(&scene);
         let occluders = Occluders::new(&scene);
         hierarchy.index(&occluders);
-        let (floor, lamp) = (hierarchy.tree.face_node[0], hierarchy.tree.face_node[1]);
         let leaf_radiosity: Vec<Rgb> = (0..hierarchy.tree.leaves.len())
             .map(|i| hierarchy.tree.leaf_patch(i).emission)
             .collect();
         let sources = hierarchy.node_radiosity(&leaf_radiosity);
+        (hierarchy, occluders, sources)
+    }
+
+    #[test]
+    fn a_partly_hidden_pair_gets_rays_only_where_they_can_change_its_decision() {
+        let (hierarchy, occluders, sources) = lit_by_emission(screened_lamp(0.01, 0.37));
+        let (floor, lamp) = (hierarchy.tree.face_node[0], hierarchy.tree.face_node[1]);
         let decide_at = |tolerance: f64| {
             let decider = Decider {
                 factors: LinkFactors::new(&hierarchy, &occluders, FormFactorSettings::default()),
@@ -813,15 +819,8 @@ mod tests {
     fn a_clear_pair_passes_its_shaft_on_to_its_pieces_and_a_blocked_one_does_not() {
         // A screen 1 above the unit floor covers x < 0.37 there: from the floor's quarters at
         // x > 0.5 every segment to the lamp 10 above passes it; from those below, some do not.
-        let scene = screened_lamp(1.0, 0.37);
-        let mut hierarchy = Hierarchy::cluster_tree(&scene);
-        let occluders = Occluders::new(&scene);
-        hierarchy.index(&occluders);
+        let (mut hierarchy, occluders, sources) = lit_by_emission(screened_lamp(1.0, 0.37));
         let (floor, lamp) = (hierarchy.tree.face_node[0], hierarchy.tree.face_node[1]);
-        let leaf_radiosity: Vec<Rgb> = (0..hierarchy.tree.leaves.len())
-            .map(|i| hierarchy.tree.leaf_patch(i).emission)
-            .collect();
-        let sources = hierarchy.node_radiosity(&leaf_radiosity);
         hierarchy.tree.subdivide(floor);
         let quarters: Vec<u32> = hierarchy.tree.nodes[floor as usize].children().collect();
         quarters.iter().for_each(|&q| hierarchy.tree.subdivide(q));
