@@ -209,10 +209,12 @@ impl<'a> LinkFactors<'a> {
     ) -> Estimate {
         let (p, q) = self.element_patches(receiver, source);
         let (factor, kernel_spread) = (estimate.factor, estimate.spread);
-        let measured = |hidden: PartlyHidden, visibility_spread: f64| Estimate {
-            factor: hidden.factor,
+        // With visibility measured: `factor`, the visible source's `centroid`, and how much the
+        // visible share varies over the receiver.
+        let measured = |factor_seen: f64, centroid: DVec3, visibility_spread: f64| Estimate {
+            factor: factor_seen,
             spread: kernel_spread + factor * visibility_spread,
-            centroid: Some(hidden.centroid),
+            centroid: Some(centroid),
             ..estimate
         };
         if rays == Rays::ForFactor {
@@ -222,13 +224,8 @@ impl<'a> LinkFactors<'a> {
             // link's budget), so four rays keep it within that. The spread is not measured:
             // as wide as it can be, so that a later round whose source is brighter measures
             // it before keeping the link again.
-            let (factor, centroid) = self.one_ray_a_point_factor(receiver, source);
-            return Estimate {
-                factor,
-                spread: kernel_spread + estimate.factor,
-                centroid: Some(centroid),
-                ..estimate
-            };
+            let (factor_seen, centroid) = self.one_ray_a_point_factor(receiver, source);
+            return measured(factor_seen, centroid, 1.0);
         }
         // A few rays first: where they all pass, the source is taken as seen whole from the
         // whole receiver (a shadow over a tenth of the pair escapes 16 rays one time in five,
@@ -237,13 +234,13 @@ impl<'a> LinkFactors<'a> {
         // gap (on the monastery piece, 0.15 points of energy and 0.2 of RMS more).
         let probe = self.partly_hidden_factor(receiver, source, 1, PROBE_RAYS_PER_POINT);
         if probe.all_clear {
-            return measured(probe, 0.0);
+            return measured(probe.factor, probe.centroid, 0.0);
         }
         let level = integration_level(p, q, factor, kernel_spread).min(2);
         let per_point = rays_for_pair(p, q, &self.rays).max(PROBE_RAYS_PER_POINT);
         let hidden = self.partly_hidden_factor(receiver, source, level, per_point);
         let spread = hidden.most_visible - hidden.least_visible;
-        measured(hidden, spread)
+        measured(hidden.factor, hidden.centroid, spread)
     }
 
     /// The factor a kept link carries, visibility included (measured, where partly hidden).
