@@ -115,7 +115,7 @@ fn midpoint(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
 /// longest edge, Rivara 1984's longest-edge bisection). A split of a sliver then adds one leaf
 /// where the light along it asks, not three: the monastery's beams are slivers 7 m long, they
 /// held most of its error, and four pieces at a time spent leaves across them as well.
-fn split_lattices(polygon: &Polygon, l: [[u32; 2]; 4]) -> Vec<[[u32; 2]; 4]> {
+fn split_lattices(polygon: &Polygon, l: [[u32; 2]; 4]) -> Children {
     let c = polygon.corners();
     if polygon.is_quad() {
         let along_u = c[0].distance(c[1]) + c[3].distance(c[2]);
@@ -127,18 +127,18 @@ fn split_lattices(polygon: &Polygon, l: [[u32; 2]; 4]) -> Vec<[[u32; 2]; 4]> {
             midpoint(l[3], l[0]),
         );
         if along_u > ELONGATED * along_v {
-            return vec![[l[0], m01, m23, l[3]], [m01, l[1], l[2], m23]];
+            return Children::two([l[0], m01, m23, l[3]], [m01, l[1], l[2], m23]);
         }
         if along_v > ELONGATED * along_u {
-            return vec![[l[0], l[1], m12, m30], [m30, m12, l[2], l[3]]];
+            return Children::two([l[0], l[1], m12, m30], [m30, m12, l[2], l[3]]);
         }
         let centre = midpoint(l[0], l[2]);
-        return vec![
+        return Children::four([
             [l[0], m01, centre, m30],
             [m01, l[1], m12, centre],
             [centre, m12, l[2], m23],
             [m30, centre, m23, l[3]],
-        ];
+        ]);
     }
     // The longest edge, from corner `k` to the next; its length over the height across it,
     // `L / (2 A / L)`.
@@ -152,19 +152,61 @@ fn split_lattices(polygon: &Polygon, l: [[u32; 2]; 4]) -> Vec<[[u32; 2]; 4]> {
     if longest > ELONGATED * 2.0 * polygon.area() {
         let (a, b, opposite) = (l[k], l[(k + 1) % 3], l[(k + 2) % 3]);
         let m = midpoint(a, b);
-        return vec![[a, m, opposite, opposite], [m, b, opposite, opposite]];
+        return Children::two([a, m, opposite, opposite], [m, b, opposite, opposite]);
     }
     let (ab, bc, ca) = (
         midpoint(l[0], l[1]),
         midpoint(l[1], l[2]),
         midpoint(l[2], l[0]),
     );
-    vec![
+    Children::four([
         [l[0], ab, ca, ca],
         [ab, l[1], bc, bc],
         [ca, bc, l[2], l[2]],
         [ab, bc, ca, ca],
-    ]
+    ])
+}
+
+/// The lattice corners of an element's children, two or four: on the stack, as refinement
+/// counts them for every pair it decides ([`Tree::split_count`]).
+struct Children {
+    lattices: [[[u32; 2]; 4]; 4],
+    count: usize,
+}
+
+impl Children {
+    fn two(first: [[u32; 2]; 4], second: [[u32; 2]; 4]) -> Children {
+        Children {
+            lattices: [first, second, first, second],
+            count: 2,
+        }
+    }
+
+    fn four(lattices: [[[u32; 2]; 4]; 4]) -> Children {
+        Children { lattices, count: 4 }
+    }
+
+    fn as_slice(&self) -> &[[[u32; 2]; 4]] {
+        &self.lattices[..self.count]
+    }
+}
+
+/// The lattice corners of a whole `face`.
+fn whole_face_lattice(face: &Polygon) -> [[u32; 2]; 4] {
+    let s = LATTICE_STEPS;
+    match face.is_quad() {
+        true => [[0, 0], [s, 0], [s, s], [0, s]],
+        false => [[0, 0], [s, 0], [0, s], [0, s]],
+    }
+}
+
+/// The piece of `face` with lattice corners `lattice`.
+fn lattice_polygon(face: &Polygon, lattice: [[u32; 2]; 4]) -> Polygon {
+    let p = lattice.map(|at| lattice_point(face, at));
+    match face.is_quad() {
+        true => Polygon::quad(p[0], p[1], p[2], p[3]),
+        false => Polygon::triangle(p[0], p[1], p[2]),
+    }
 }
 
 /// Face `face` of `scene` as one unsplit element, its size scale capped at `typical_radius`.
@@ -182,12 +224,7 @@ fn face_element(scene: &Scene, face: u32, typical_radius: f64) -> Element {
         reflectance: f.reflectance,
         emission: f.emission,
     };
-    let s = LATTICE_STEPS;
-    let lattice = if f.polygon.is_quad() {
-        [[0, 0], [s, 0], [s, s], [0, s]]
-    } else {
-        [[0, 0], [s, 0], [0, s], [0, s]]
-    };
+    let lattice = whole_face_lattice(&f.polygon);
     Element {
         patch,
         lattice,
@@ -329,7 +366,7 @@ impl Tree {
             .element
             .as_ref()
             .expect("only elements are split");
-        split_lattices(&element.patch.polygon, element.lattice).len()
+        split_lattices(&element.patch.polygon, element.lattice).count
     }
 
     /// Splits element `n` ([`split_lattices`]), once.
@@ -343,13 +380,8 @@ impl Tree {
         let face = &self.faces[element.patch.face as usize];
         let children = split_lattices(&element.patch.polygon, element.lattice);
         let first = self.nodes.len() as u32;
-        for &lattice in &children {
-            let p = lattice.map(|at| lattice_point(face, at));
-            let polygon = if face.is_quad() {
-                Polygon::quad(p[0], p[1], p[2], p[3])
-            } else {
-                Polygon::triangle(p[0], p[1], p[2])
-            };
+        for &lattice in children.as_slice() {
+            let polygon = lattice_polygon(face, lattice);
             let patch = Patch {
                 polygon,
                 ..element.patch
@@ -367,7 +399,7 @@ impl Tree {
         }
         let node = &mut self.nodes[n as usize];
         node.first_child = first;
-        node.child_count = children.len() as u32;
+        node.child_count = children.count as u32;
     }
 
     /// A point of node `n` for the `k`-th sample of a stream. Points spread by area over the
@@ -509,27 +541,16 @@ pub(super) fn element_node(mut e: Element, parent: u32, faces: Range<u32>) -> No
 
 #[cfg(test)]
 mod tests {
-    use super::{LATTICE_STEPS, lattice_point, split_lattices};
+    use super::{lattice_polygon, split_lattices, whole_face_lattice};
     use crate::geometry::Polygon;
     use crate::hierarchy::fixtures::{build, closed_cube};
     use glam::{DVec3, dvec3};
 
     /// The children `split_lattices` gives an element covering all of `face`, as polygons.
     fn pieces(face: &Polygon) -> Vec<Polygon> {
-        let s = LATTICE_STEPS;
-        let whole = match face.is_quad() {
-            true => [[0, 0], [s, 0], [s, s], [0, s]],
-            false => [[0, 0], [s, 0], [0, s], [0, s]],
-        };
-        split_lattices(face, whole)
-            .iter()
-            .map(|l| {
-                let p = l.map(|at| lattice_point(face, at));
-                match face.is_quad() {
-                    true => Polygon::quad(p[0], p[1], p[2], p[3]),
-                    false => Polygon::triangle(p[0], p[1], p[2]),
-                }
-            })
+        let children = split_lattices(face, whole_face_lattice(face));
+        (children.as_slice().iter())
+            .map(|&l| lattice_polygon(face, l))
             .collect()
     }
 
