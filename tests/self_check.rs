@@ -151,8 +151,10 @@ fn a_solve_to_a_target_stops_within_it_and_is_within_it_on_the_cornell_box() {
 /// not at the `--error` floor it did not need.
 #[test]
 fn a_move_rebuilds_a_hierarchy_solved_to_a_target_at_the_knob_it_reached() {
+    // The Cornell box reads about 3.3% at the starting knob (its estimate up to 4.8%): 3%
+    // takes steps, and is reached above the 0.03 floor.
     let target = solver::Target {
-        error: 0.08,
+        error: 0.03,
         seconds: None,
     };
     let request = SolveRequest {

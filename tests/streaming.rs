@@ -637,12 +637,21 @@ fn a_solve_short_of_its_tolerance_is_served_as_not_final_and_degrades_health() {
 
 #[test]
 fn the_self_check_is_served_in_the_report_and_metrics_and_a_bad_answer_degrades_health() {
-    // One patch per face of the Cornell box is far off (about 30%); the default 1,000 are not.
-    for (patches, bad) in [(30, true), (1000, false)] {
-        let request = SolveRequest {
-            patches: PatchTarget::Count(patches),
-            ..SolveRequest::default()
-        };
+    // One Jacobi iteration on the Cornell box leaves out every bounce but the ones the vertices
+    // gather: 27% dark everywhere (measured: at least 21% at 64 probes), far off wherever the
+    // probes fall. The default solve is not. (One patch per face served here before vertices
+    // gathered their last bounces; now its error sits at a few probes, too few for 64 probes
+    // to prove.)
+    let unconverged = SolveRequest {
+        solver: solver::SolverSettings {
+            method: solver::Method::Jacobi,
+            max_iterations: 1,
+            ..solver::SolverSettings::default()
+        },
+        ..SolveRequest::default()
+    };
+    for (request, bad) in [(unconverged, true), (SolveRequest::default(), false)] {
+        let patches = request.patches;
         let prepared = prepare("scenes/cornell-box.obj".as_ref(), request).unwrap();
         let shared = shared_for(&prepared, Limits::default(), TOKEN.into());
         solve_and_publish(&prepared, &shared, None).unwrap();
@@ -670,13 +679,13 @@ fn the_self_check_is_served_in_the_report_and_metrics_and_a_bad_answer_degrades_
         }
         match (bad, shared.health.status()) {
             (true, server::health::Status::Degraded(what)) => assert!(
-                what.starts_with("the self-check estimates ")
+                what.contains("the self-check estimates ")
                     && what.contains("smooth RMS error (at least ")
                     && smooth.low > solver::check::WARN_ABOVE,
                 "{what}"
             ),
             (false, server::health::Status::Ok) => assert!(smooth.low <= solver::check::WARN_ABOVE),
-            (_, status) => panic!("{patches} patches, {smooth:?}: {status:?}"),
+            (_, status) => panic!("{patches:?}, {smooth:?}: {status:?}"),
         }
     }
     // Off when the operator says so: no estimate, no gauges.

@@ -26,7 +26,7 @@ pub(super) struct Reach {
 }
 
 /// How far toward its centroid a leaf's corner is tested for burial: where the display's
-/// corner values are read (`solution::vertices`'s `INSET`).
+/// corner values are read (`solution::gather_point`'s `INSET`).
 const CORNER_INSET: f64 = 0.25;
 
 impl Reach {
@@ -48,7 +48,7 @@ impl Reach {
                 patch
                     .polygon
                     .for_each_quadrature_point(1, |x, weight| quadrature.push((x, weight)));
-                // Also where viewers' corner values are read (`solution::vertices`'s inset
+                // Also where viewers' corner values are read (`solution::gather_point`'s inset
                 // points): a corner of a sliver can lie inside a wall its quadrature points miss.
                 let centroid = patch.polygon.centroid();
                 let insets = patch

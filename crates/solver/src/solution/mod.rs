@@ -3,6 +3,9 @@
 //! vertices ([`vertices`]), and the offline path from a
 //! scene file to a solved scene ([`pipeline`]).
 
+mod bounce;
+mod gather_point;
+mod locator;
 pub mod pipeline;
 pub mod report;
 pub mod request;

@@ -578,7 +578,8 @@ impl Session {
         // fresh solve of the edited scene gives it.
         let lit = self.edited_scene();
         let occluders = Occluders::new(&lit);
-        self.corner_light = CornerLight::new(&lit, &self.mesh, &occluders, &self.lights);
+        self.corner_light
+            .gather_lights(&lit, &self.mesh, &occluders, &self.lights);
         // The vertex values summed so far, gathered again alike (each light's share of the
         // rays may have changed with the new one).
         if self.base_vertices.is_some() {
