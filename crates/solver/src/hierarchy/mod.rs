@@ -4,8 +4,7 @@
 //!
 //! - **Elements** (Hanrahan, Salzman, Aupperle 1991, "A Rapid Hierarchical Radiosity
 //!   Algorithm"): each input face roots a quadtree (a quad into four quads, a triangle into four
-//!   similar triangles; an elongated element in two across its length), split only when a
-//!   link asks for it.
+//!   similar triangles), split only when a link asks for it.
 //! - **Clusters** (Smits, Arvo, Greenberg 1994; Sillion 1995): a binary tree of median splits
 //!   over the input faces sits above them, so refinement starts from one self-link of the root,
 //!   not from faces^2 links: a face gathers from whole clusters while they are far enough. A

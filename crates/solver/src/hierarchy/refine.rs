@@ -4,7 +4,7 @@
 
 use super::factor::{Estimate, LinkFactors, Rays, kernel_centre, tangent_coordinates};
 use super::shaft::Visibility;
-use super::tree::{MAX_DEPTH, Node};
+use super::tree::{ELEMENT_CHILDREN, MAX_DEPTH, Node};
 use super::{Hierarchy, Link, Pair};
 use crate::pair::FormFactorSettings;
 use crate::sampling::pair_seed;
@@ -109,9 +109,8 @@ impl Fineness {
 /// An element's size as refinement measures it: its bounding radius, or that of the equilateral
 /// triangle of its area where that is smaller, `sqrt(4 A / (3 sqrt 3))`. The same for squares
 /// and well-shaped triangles; a sliver counts as small as its area. Its children are slivers
-/// too (split in four or halved, a needle's pieces are needles), so by its length alone a
-/// 4 m x 15 cm strip of a real model split into 1,024 leaves of 4 cm, and such faces made
-/// most of its 490k leaves.
+/// too (a triangle splits into four like it), so by its length alone a 4 m x 15 cm strip of a
+/// real model split into 1,024 leaves of 4 cm, and such faces made most of its 490k leaves.
 fn element_size(n: &Node) -> f64 {
     n.radius.min((4.0 * n.area / (3.0 * 3.0f64.sqrt())).sqrt())
 }
@@ -550,7 +549,7 @@ impl Hierarchy {
     /// unless the split is forced, as a cluster that receives always splits).
     fn pairs_made(&self, pair: Pair, decision: &Decision) -> (usize, usize) {
         let children = |n: u32| match self.tree.is_unsplit_element(n) {
-            true => self.tree.split_count(n),
+            true => ELEMENT_CHILDREN,
             false => self.tree.nodes[n as usize].child_count as usize,
         };
         let now = match decision {
@@ -611,7 +610,7 @@ impl Hierarchy {
                 indices.push(i);
                 if !std::mem::replace(&mut marked[n as usize], true) {
                     // The element stops being a leaf; its children are.
-                    added += self.tree.split_count(n) - 1;
+                    added += ELEMENT_CHILDREN - 1;
                 }
             }
         }

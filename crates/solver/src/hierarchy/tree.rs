@@ -15,10 +15,8 @@ use std::ops::Range;
 const LATTICE_STEPS: u32 = 1 << 24;
 /// Deepest split of an input face (each level halves the lattice step).
 pub(super) const MAX_DEPTH: u32 = 20;
-/// Longest side over the width across it (twice the area over the longest side, for a
-/// triangle) past which an element splits in two across its
-/// length instead of into four similar pieces ([`split_lattices`]).
-const ELONGATED: f64 = 3.0;
+/// Children an element splits into: a quad's four quarters, a triangle's four similar ones.
+pub(super) const ELEMENT_CHILDREN: usize = 4;
 /// Marks "no parent".
 pub(super) const NONE: u32 = u32::MAX;
 
@@ -108,107 +106,6 @@ fn midpoint(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
     [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2]
 }
 
-/// The lattice corners of the children of an element with `polygon` and corners `l`: a
-/// quad's four quarters and a triangle's four similar pieces, or, where the element is more
-/// than [`ELONGATED`] times as long as it is wide, its two halves across its length (a quad
-/// halved between its long sides, into better-shaped halves; a triangle by the midpoint of its
-/// longest edge, Rivara 1984's longest-edge bisection). A split of a sliver then adds one leaf
-/// where the light along it asks, not three: the monastery's beams are slivers 7 m long, they
-/// held most of its error, and four pieces at a time spent leaves across them as well.
-fn split_lattices(polygon: &Polygon, l: [[u32; 2]; 4]) -> Children {
-    let c = polygon.corners();
-    if polygon.is_quad() {
-        let along_u = c[0].distance(c[1]) + c[3].distance(c[2]);
-        let along_v = c[0].distance(c[3]) + c[1].distance(c[2]);
-        let (m01, m12, m23, m30) = (
-            midpoint(l[0], l[1]),
-            midpoint(l[1], l[2]),
-            midpoint(l[2], l[3]),
-            midpoint(l[3], l[0]),
-        );
-        if along_u > ELONGATED * along_v {
-            return Children::two([l[0], m01, m23, l[3]], [m01, l[1], l[2], m23]);
-        }
-        if along_v > ELONGATED * along_u {
-            return Children::two([l[0], l[1], m12, m30], [m30, m12, l[2], l[3]]);
-        }
-        let centre = midpoint(l[0], l[2]);
-        return Children::four([
-            [l[0], m01, centre, m30],
-            [m01, l[1], m12, centre],
-            [centre, m12, l[2], m23],
-            [m30, centre, m23, l[3]],
-        ]);
-    }
-    // The longest edge, from corner `k` to the next; its length over the height across it,
-    // `L / (2 A / L)`.
-    let k = (0..3)
-        .max_by(|&a, &b| {
-            let edge = |i: usize| c[i].distance_squared(c[(i + 1) % 3]);
-            edge(a).total_cmp(&edge(b))
-        })
-        .expect("three edges");
-    let longest = c[k].distance_squared(c[(k + 1) % 3]);
-    if longest > ELONGATED * 2.0 * polygon.area() {
-        let (a, b, opposite) = (l[k], l[(k + 1) % 3], l[(k + 2) % 3]);
-        let m = midpoint(a, b);
-        return Children::two([a, m, opposite, opposite], [m, b, opposite, opposite]);
-    }
-    let (ab, bc, ca) = (
-        midpoint(l[0], l[1]),
-        midpoint(l[1], l[2]),
-        midpoint(l[2], l[0]),
-    );
-    Children::four([
-        [l[0], ab, ca, ca],
-        [ab, l[1], bc, bc],
-        [ca, bc, l[2], l[2]],
-        [ab, bc, ca, ca],
-    ])
-}
-
-/// The lattice corners of an element's children, two or four: on the stack, as refinement
-/// counts them for every pair it decides ([`Tree::split_count`]).
-struct Children {
-    lattices: [[[u32; 2]; 4]; 4],
-    count: usize,
-}
-
-impl Children {
-    fn two(first: [[u32; 2]; 4], second: [[u32; 2]; 4]) -> Children {
-        Children {
-            lattices: [first, second, first, second],
-            count: 2,
-        }
-    }
-
-    fn four(lattices: [[[u32; 2]; 4]; 4]) -> Children {
-        Children { lattices, count: 4 }
-    }
-
-    fn as_slice(&self) -> &[[[u32; 2]; 4]] {
-        &self.lattices[..self.count]
-    }
-}
-
-/// The lattice corners of a whole `face`.
-fn whole_face_lattice(face: &Polygon) -> [[u32; 2]; 4] {
-    let s = LATTICE_STEPS;
-    match face.is_quad() {
-        true => [[0, 0], [s, 0], [s, s], [0, s]],
-        false => [[0, 0], [s, 0], [0, s], [0, s]],
-    }
-}
-
-/// The piece of `face` with lattice corners `lattice`.
-fn lattice_polygon(face: &Polygon, lattice: [[u32; 2]; 4]) -> Polygon {
-    let p = lattice.map(|at| lattice_point(face, at));
-    match face.is_quad() {
-        true => Polygon::quad(p[0], p[1], p[2], p[3]),
-        false => Polygon::triangle(p[0], p[1], p[2]),
-    }
-}
-
 /// Face `face` of `scene` as one unsplit element, its size scale capped at `typical_radius`.
 fn face_element(scene: &Scene, face: u32, typical_radius: f64) -> Element {
     let f = &scene.faces[face as usize];
@@ -224,7 +121,12 @@ fn face_element(scene: &Scene, face: u32, typical_radius: f64) -> Element {
         reflectance: f.reflectance,
         emission: f.emission,
     };
-    let lattice = whole_face_lattice(&f.polygon);
+    let s = LATTICE_STEPS;
+    let lattice = if f.polygon.is_quad() {
+        [[0, 0], [s, 0], [s, s], [0, s]]
+    } else {
+        [[0, 0], [s, 0], [0, s], [0, s]]
+    };
     Element {
         patch,
         lattice,
@@ -354,22 +256,13 @@ impl Tree {
             .patch
     }
 
-    /// Whether node `n` is an element not split yet.
+    /// Whether node `n` is an element not split yet: splitting it adds three leaves.
     pub(super) fn is_unsplit_element(&self, n: u32) -> bool {
         let node = &self.nodes[n as usize];
         node.element.is_some() && node.child_count == 0
     }
 
-    /// The children splitting unsplit element `n` makes: four, or two where it is elongated.
-    pub(super) fn split_count(&self, n: u32) -> usize {
-        let element = self.nodes[n as usize]
-            .element
-            .as_ref()
-            .expect("only elements are split");
-        split_lattices(&element.patch.polygon, element.lattice).count
-    }
-
-    /// Splits element `n` ([`split_lattices`]), once.
+    /// Splits element `n` into four (once).
     pub(super) fn subdivide(&mut self, n: u32) {
         let node = &self.nodes[n as usize];
         if node.child_count > 0 {
@@ -378,10 +271,42 @@ impl Tree {
         let element = node.element.clone().expect("only elements are subdivided");
         let faces = node.faces.clone();
         let face = &self.faces[element.patch.face as usize];
-        let children = split_lattices(&element.patch.polygon, element.lattice);
+        let l = element.lattice;
+        let children: [[[u32; 2]; 4]; ELEMENT_CHILDREN] = if face.is_quad() {
+            let centre = midpoint(l[0], l[2]);
+            let (m01, m12, m23, m30) = (
+                midpoint(l[0], l[1]),
+                midpoint(l[1], l[2]),
+                midpoint(l[2], l[3]),
+                midpoint(l[3], l[0]),
+            );
+            [
+                [l[0], m01, centre, m30],
+                [m01, l[1], m12, centre],
+                [centre, m12, l[2], m23],
+                [m30, centre, m23, l[3]],
+            ]
+        } else {
+            let (ab, bc, ca) = (
+                midpoint(l[0], l[1]),
+                midpoint(l[1], l[2]),
+                midpoint(l[2], l[0]),
+            );
+            [
+                [l[0], ab, ca, ca],
+                [ab, l[1], bc, bc],
+                [ca, bc, l[2], l[2]],
+                [ab, bc, ca, ca],
+            ]
+        };
         let first = self.nodes.len() as u32;
-        for &lattice in children.as_slice() {
-            let polygon = lattice_polygon(face, lattice);
+        for lattice in children {
+            let p = lattice.map(|at| lattice_point(face, at));
+            let polygon = if face.is_quad() {
+                Polygon::quad(p[0], p[1], p[2], p[3])
+            } else {
+                Polygon::triangle(p[0], p[1], p[2])
+            };
             let patch = Patch {
                 polygon,
                 ..element.patch
@@ -399,7 +324,7 @@ impl Tree {
         }
         let node = &mut self.nodes[n as usize];
         node.first_child = first;
-        node.child_count = children.count as u32;
+        node.child_count = 4;
     }
 
     /// A point of node `n` for the `k`-th sample of a stream. Points spread by area over the
@@ -541,73 +466,7 @@ pub(super) fn element_node(mut e: Element, parent: u32, faces: Range<u32>) -> No
 
 #[cfg(test)]
 mod tests {
-    use super::{lattice_polygon, split_lattices, whole_face_lattice};
-    use crate::geometry::Polygon;
     use crate::hierarchy::fixtures::{build, closed_cube};
-    use glam::{DVec3, dvec3};
-
-    /// The children `split_lattices` gives an element covering all of `face`, as polygons.
-    fn pieces(face: &Polygon) -> Vec<Polygon> {
-        let children = split_lattices(face, whole_face_lattice(face));
-        (children.as_slice().iter())
-            .map(|&l| lattice_polygon(face, l))
-            .collect()
-    }
-
-    #[test]
-    fn a_sliver_splits_in_two_across_its_length_and_a_well_shaped_element_in_four() {
-        // A 7 m beam side 8 cm wide, as the monastery's are: halved by its longest edge.
-        let sliver = Polygon::triangle(DVec3::ZERO, dvec3(0.0, 0.08, 0.0), dvec3(7.0, 0.04, 0.0));
-        let halves = pieces(&sliver);
-        assert_eq!(halves.len(), 2);
-        for half in &halves {
-            assert!((half.area() / sliver.area() - 0.5).abs() < 1e-9);
-        }
-        // Halved again, each a quarter of it, none longer than half of it.
-        let quarters: Vec<Polygon> = halves.iter().flat_map(pieces).collect();
-        assert_eq!(quarters.len(), 4);
-        for quarter in &quarters {
-            assert!((quarter.area() / sliver.area() - 0.25).abs() < 1e-9);
-            let c = quarter.corners();
-            let longest = (0..3)
-                .map(|k| c[k].distance(c[(k + 1) % 3]))
-                .fold(0.0, f64::max);
-            assert!(longest < 0.5001 * 7.0, "{quarter:?}");
-        }
-        // A 4 m x 1 m quad: two 2 m x 1 m halves between its long sides.
-        let strip = Polygon::quad(
-            DVec3::ZERO,
-            dvec3(4.0, 0.0, 0.0),
-            dvec3(4.0, 1.0, 0.0),
-            dvec3(0.0, 1.0, 0.0),
-        );
-        let halves = pieces(&strip);
-        assert_eq!(halves.len(), 2);
-        assert!(halves.iter().all(|h| (h.area() - 2.0).abs() < 1e-9));
-        // Squares, a 2:1 rectangle and a right triangle split into four similar pieces.
-        let square = Polygon::quad(
-            DVec3::ZERO,
-            dvec3(1.0, 0.0, 0.0),
-            dvec3(1.0, 1.0, 0.0),
-            dvec3(0.0, 1.0, 0.0),
-        );
-        let oblong = Polygon::quad(
-            DVec3::ZERO,
-            dvec3(2.0, 0.0, 0.0),
-            dvec3(2.0, 1.0, 0.0),
-            dvec3(0.0, 1.0, 0.0),
-        );
-        let right = Polygon::triangle(DVec3::ZERO, dvec3(1.0, 0.0, 0.0), dvec3(0.0, 1.0, 0.0));
-        for shape in [square, oblong, right] {
-            let quarters = pieces(&shape);
-            assert_eq!(quarters.len(), 4, "{shape:?}");
-            assert!(
-                quarters
-                    .iter()
-                    .all(|q| (q.area() / shape.area() - 0.25).abs() < 1e-9)
-            );
-        }
-    }
 
     #[test]
     fn leaves_tile_every_face_and_share_corners() {
