@@ -637,11 +637,10 @@ fn a_solve_short_of_its_tolerance_is_served_as_not_final_and_degrades_health() {
 
 #[test]
 fn the_self_check_is_served_in_the_report_and_metrics_and_a_bad_answer_degrades_health() {
-    // One Jacobi iteration on the Cornell box leaves out every bounce but the ones the vertices
-    // gather: 27% dark everywhere (measured: at least 21% at 64 probes), far off wherever the
-    // probes fall. The default solve is not. (One patch per face served here before vertices
-    // gathered their last bounces; now its error sits at a few probes, too few for 64 probes
-    // to prove.)
+    // One Jacobi iteration from zero leaves the Cornell box's patches at their emission: the
+    // vertices show next to no reflected light (99% dark at 64 probes), far off wherever the
+    // probes fall. The default solve is not. (One patch per face, served here before, is off
+    // by about 30% but at few probes: its lower bound came out 0 to 8% by the seed.)
     let unconverged = SolveRequest {
         solver: solver::SolverSettings {
             method: solver::Method::Jacobi,

@@ -3,7 +3,7 @@
 
 use super::report::{ObjectRadiosity, SolveReport, StageSeconds};
 use super::request::{SolveError, SolveRequest, check_dense_size};
-use super::vertices::{CornerLight, clamp_below_zero};
+use super::vertices::{CornerIndirect, CornerLight, clamp_below_zero};
 use crate::check::{CheckSettings, Estimate};
 use crate::form_factors::{DenseFormFactors, UpdateStats};
 use crate::hierarchy::{BuiltHierarchy, Hierarchy, HierarchySettings, HierarchyStats};
@@ -318,7 +318,11 @@ impl Session {
             .filter(|f| f.emission.max_element() > 0.0)
             .map(|f| f.object)
             .collect();
-        let corner_light = CornerLight::new(&scene, &mesh, occluders, &lights);
+        let indirect = match &factors {
+            Factors::Dense(_) => CornerIndirect::Averaged,
+            Factors::Hierarchy(_) => CornerIndirect::Gathered,
+        };
+        let corner_light = CornerLight::new(&scene, &mesh, occluders, &lights, indirect);
         let mut seconds = seconds;
         seconds.form_factors += clock.elapsed().as_secs_f64();
         Session {
@@ -454,8 +458,9 @@ impl Session {
                     &moved,
                     crate::geometry::bounds(swept),
                 );
+                let averaged = CornerIndirect::Averaged;
                 self.corner_light =
-                    CornerLight::new(&self.scene, &self.mesh, &occluders, &self.lights);
+                    CornerLight::new(&self.scene, &self.mesh, &occluders, &self.lights, averaged);
                 Ok(MoveReport {
                     work: MoveWork::Dense(stats),
                     seconds: clock.elapsed().as_secs_f64(),

@@ -68,6 +68,19 @@ struct Emitter {
     brightness: f64,
 }
 
+/// Where a corner's indirect light comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CornerIndirect {
+    /// The area mean of the patches around it. A dense matrix's patches hold their indirect
+    /// light exactly to their mesh, and the gather's noise (64 rays: about 1.5% smooth RMS on
+    /// the Cornell box) would pass that error from 1,200 patches on (docs/BENCHMARKS.md).
+    Averaged,
+    /// The last bounces gathered at the corner ([`bounce`]). A hierarchy's links carry sampled
+    /// cluster factors, pairs dropped as hidden and leaves coarse for the light across them:
+    /// gathered, their errors reach viewers only through one more reflection.
+    Gathered,
+}
+
 /// What a mesh's corners receive straight from the emitters, and which patches around each
 /// corner light can reach. It depends on the geometry and on which faces emit, not on how
 /// much: built once per mesh, it serves every emission edit.
@@ -80,9 +93,11 @@ pub struct CornerLight {
     /// Whether direct light is gathered at the corners (at most [`MAX_GATHERED_EMITTERS`]
     /// emitting faces); if not, corners average their patches' whole reflected radiosity.
     gathered: bool,
+    /// Where the corners' indirect light comes from.
+    indirect: CornerIndirect,
     /// Per corner, the corners its rays for the last bounces of indirect light read
-    /// ([`bounce::landings`]), when direct light is gathered (the bounces read reflected light
-    /// only; the direct light is the corners' own).
+    /// ([`bounce::landings`]), when they are gathered and so is direct light (the bounces
+    /// read reflected light only; the direct light is the corners' own).
     bounce: Option<PointWeights>,
     /// Per patch and corner slot: whether light reaches the patch at the point [`INSET`](super::gather_point::INSET) of the
     /// way in from that corner (not under a box standing on the floor:
@@ -93,12 +108,14 @@ pub struct CornerLight {
 impl CornerLight {
     /// Gathers the emitters of `scene` at the corners of `mesh` (built from it): the faces
     /// that emit, and every face of the objects in `lights` (a light turned off keeps its
-    /// place, so that turning it on again finds its direct light gathered).
+    /// place, so that turning it on again finds its direct light gathered), with their
+    /// `indirect` light.
     pub fn new(
         scene: &Scene,
         mesh: &Mesh,
         occluders: &Occluders,
         lights: &BTreeSet<u32>,
+        indirect: CornerIndirect,
     ) -> CornerLight {
         let reached = mesh
             .patches
@@ -118,6 +135,7 @@ impl CornerLight {
             corners: PointWeights::none(0),
             centres: PointWeights::none(0),
             gathered: false,
+            indirect,
             bounce: None,
             reached,
         };
@@ -156,7 +174,7 @@ impl CornerLight {
         }
         let corner_points = GatherPoint::corners_of(mesh);
         let centroids = GatherPoint::centroids_of(mesh);
-        if self.bounce.is_none() {
+        if self.indirect == CornerIndirect::Gathered && self.bounce.is_none() {
             let faces = scene.faces.len();
             self.bounce = Some(bounce::landings(mesh, &corner_points, occluders, faces));
         }
@@ -463,6 +481,7 @@ mod tests {
                 &solved.mesh,
                 &Occluders::new(&scene),
                 &std::collections::BTreeSet::new(),
+                super::CornerIndirect::Averaged,
             );
             let face_emission = [Rgb::ZERO, Rgb::splat(10.0)];
             let got = light.corners.read(&face_emission)[corner];
@@ -485,7 +504,9 @@ mod tests {
         add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z * 2.0, x * 2.0), GREY);
         add_parallelogram(&mut scene, "plate", (DVec3::Y, x * 2.0, z * 2.0), GREY);
         let mesh = Mesh::build(&scene, PatchTarget::EdgeLength(0.5));
-        let light = CornerLight::new(&scene, &mesh, &Occluders::new(&scene), &BTreeSet::new());
+        let occluders = Occluders::new(&scene);
+        let gathered = super::CornerIndirect::Gathered;
+        let light = CornerLight::new(&scene, &mesh, &occluders, &BTreeSet::new(), gathered);
         let mut reflected = vec![Rgb::ZERO; mesh.positions.len()];
         for patch in mesh.patches.iter().filter(|p| p.face == 1) {
             for &c in &patch.corners[..patch.corner_count()] {
