@@ -11,8 +11,10 @@
 //! wall's top edge it rises from zero): the patch centroids gather too, and what interpolation
 //! misses over each patch goes into its corners with the indirect light, so the mean of what
 //! viewers show over a surface is its solved light (the Cornell box at 148 patches: energy
-//! −4.6% → −0.1%, smooth RMS 13% → 7.8%). Everything is linear in each emitter's emission, so
-//! edits still superpose.
+//! −4.6% → −0.1%, smooth RMS 13% → 7.8%). On a hierarchy, whose links carry errors of their
+//! own, the indirect part is then gathered at the corner too: its last two bounces, read
+//! through rays from the corner ([`bounce`]). Everything is linear in each emitter's
+//! emission, so edits still superpose.
 
 use super::bounce;
 use super::gather_point::{GatherPoint, PointWeights, inset};
@@ -197,7 +199,10 @@ impl CornerLight {
     /// straight from the emitters, so the errors the transport makes in direct light cancel
     /// instead of adding up; what interpolation misses is the direct light's second-order mean
     /// over the patch (from its corners and centroid) less the interpolated mean, so what
-    /// viewers show of a patch holds its light where the direct light curves.
+    /// viewers show of a patch holds its light where the direct light curves. Where the
+    /// indirect light is [`CornerIndirect::Gathered`], the patches' mean is only the first
+    /// reading: each of [`GATHERED_BOUNCES`] passes replaces it by what the corner's rays read
+    /// of the reflected light the pass before left at the corners where they land.
     ///
     /// Linear in `radiosity` and `emission` together: what negative round-off leaves below zero
     /// is not clamped here ([`clamp_below_zero`] does it last), so the values of a sum of
