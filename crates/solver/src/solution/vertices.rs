@@ -101,9 +101,9 @@ pub struct CornerLight {
     /// ([`bounce::landings`]), when they are gathered and so is direct light (the bounces
     /// read reflected light only; the direct light is the corners' own).
     bounce: Option<PointWeights>,
-    /// Per patch and corner slot: whether light reaches the patch at the point [`INSET`](super::gather_point::INSET) of the
-    /// way in from that corner (not under a box standing on the floor:
-    /// [`Occluders::is_buried`]).
+    /// Per patch and corner slot: whether light reaches the patch at the point
+    /// [`INSET`](super::gather_point::INSET) of the way in from that corner (not under a box
+    /// standing on the floor: [`Occluders::is_buried`]).
     reached: Vec<[bool; 4]>,
 }
 
