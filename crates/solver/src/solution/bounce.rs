@@ -9,13 +9,14 @@
 //! Reichert 1992 and Lischinski, Tampieri, Greenberg 1993), integrates that light again
 //! against the visibility the corner itself has: what the patches got wrong is seen only
 //! through one more reflection. Each ray reads the values viewers are shown where it lands
-//! (direct light gathered at corners, interpolated), so the gather is linear in them: a fixed
-//! sparse matrix from corners to corners, built once per mesh, that serves every emission edit.
+//! (direct light gathered at corners, interpolated), so the gather is linear in them: where
+//! each ray landed is kept (8 bytes a ray), once per mesh, and serves every emission edit.
 
-use super::gather_point::{GatherPoint, PointWeights};
+use super::gather_point::{GatherPoint, PointRows};
 use super::locator::PatchLocator;
 use crate::mesh::Mesh;
 use crate::sampling::{cosine_direction, pair_seed, stratified_uv};
+use crate::scene::Rgb;
 use crate::visibility::Occluders;
 use glam::DVec3;
 
@@ -29,46 +30,94 @@ pub(super) const BOUNCE_RAYS: u32 = 64;
 /// What seeds the gather's rays, apart from the direct light's at the same corner.
 const BOUNCE_SEED: usize = 0xB0C3;
 
-/// Casts the bounce's rays from each of `points` (one per corner of `mesh`; `None`: a corner
-/// no patch uses) and records where they land: per corner, the corners it reads and with what
-/// weight (summing to the share of rays that met the front of a reflecting face), so that
-/// reading the corners' reflected light gives the irradiance it gathers from surfaces over pi,
-/// W/m^2. A ray that escapes, or meets the back of a face (from inside a wall it reads
-/// nothing), gathers nothing.
-pub(super) fn landings(
-    mesh: &Mesh,
-    points: &[Option<GatherPoint>],
-    occluders: &Occluders,
-    face_count: usize,
-) -> PointWeights {
-    let locator = PatchLocator::new(mesh, face_count);
-    PointWeights::at_points(points, |index, point| {
-        let seed = pair_seed(index, BOUNCE_SEED);
-        let normal = snapped(point.normal);
-        let mut read: Vec<(u32, f32)> = Vec::with_capacity(3 * BOUNCE_RAYS as usize);
-        for k in 0..BOUNCE_RAYS {
-            let (u, v) = stratified_uv(k, seed);
-            let direction = cosine_direction(normal, u, v);
-            let origin = point.insides[k as usize % point.insides.len()];
-            let Some(hit) = occluders.closest_hit(origin, direction, point.face) else {
-                continue;
-            };
-            if !hit.front {
-                continue;
-            }
-            let landing = origin + direction * hit.distance;
-            let Some(place) = locator.place(mesh, hit.face, landing) else {
-                continue;
-            };
-            // A face that reflects nothing (a sky) sends no reflected light at any edit.
-            if mesh.patches[place.patch].reflectance.max_element() > 0.0 {
-                for (&c, &w) in place.corners.iter().zip(&place.weights) {
-                    read.push((c, (w / BOUNCE_RAYS as f64) as f32));
+/// Where one of a corner's rays landed: the fan triangle `(c0, ck, ck+1)` of a patch and the
+/// interpolation weights of its last two corners, in 8 bytes. A corner's rays are kept one by
+/// one, so its memory is bounded by its rays, not by how many patches they meet (on soup,
+/// where each ray meets another face, three corner weights a ray took three times this).
+#[derive(Clone, Copy, Debug)]
+struct Landing {
+    /// The patch's index, with its fan triangle's `k - 1` in the top bit.
+    patch_and_fan: u32,
+    /// The weights of `ck` and `ck+1`, in units of 1/65535 (`c0` has the rest).
+    weights: [u16; 2],
+}
+
+/// The top bit of [`Landing::patch_and_fan`].
+const FAN_BIT: u32 = 1 << 31;
+
+impl Landing {
+    fn new(patch: usize, k: usize, weights: [f64; 3]) -> Landing {
+        let unit = |w: f64| (w.clamp(0.0, 1.0) * f64::from(u16::MAX)).round() as u16;
+        Landing {
+            patch_and_fan: patch as u32 | if k == 2 { FAN_BIT } else { 0 },
+            weights: [unit(weights[1]), unit(weights[2])],
+        }
+    }
+
+    /// `values` (per mesh corner) interpolated where the ray landed.
+    fn read(self, mesh: &Mesh, values: &[Rgb]) -> Rgb {
+        let patch = &mesh.patches[(self.patch_and_fan & !FAN_BIT) as usize];
+        let k = if self.patch_and_fan & FAN_BIT != 0 {
+            2
+        } else {
+            1
+        };
+        let [w1, w2] = self.weights.map(|w| f64::from(w) / f64::from(u16::MAX));
+        let at = |slot: usize| values[patch.corners[slot] as usize];
+        at(0) * (1.0 - w1 - w2) + at(k) * w1 + at(k + 1) * w2
+    }
+}
+
+/// Per corner, where its bounce's rays landed on faces that reflect light.
+pub(super) struct Landings(PointRows<Landing>);
+
+impl Landings {
+    /// Casts the bounce's rays from each of `points` (one per corner of `mesh`; `None`: a
+    /// corner no patch uses) and records where they land. A ray that escapes, meets the back
+    /// of a face (from inside a wall it reads nothing), or a face that reflects nothing (a
+    /// sky, at any edit), gathers nothing.
+    pub(super) fn cast(
+        mesh: &Mesh,
+        points: &[Option<GatherPoint>],
+        occluders: &Occluders,
+        face_count: usize,
+    ) -> Landings {
+        let locator = PatchLocator::new(mesh, face_count);
+        Landings(PointRows::at_points(points, |index, point| {
+            let seed = pair_seed(index, BOUNCE_SEED);
+            let normal = snapped(point.normal);
+            let mut landed = Vec::new();
+            for k in 0..BOUNCE_RAYS {
+                let (u, v) = stratified_uv(k, seed);
+                let direction = cosine_direction(normal, u, v);
+                let origin = point.insides[k as usize % point.insides.len()];
+                let Some(hit) = occluders.closest_hit(origin, direction, point.face) else {
+                    continue;
+                };
+                if !hit.front {
+                    continue;
+                }
+                let landing = origin + direction * hit.distance;
+                let Some(place) = locator.place(mesh, hit.face, landing) else {
+                    continue;
+                };
+                if mesh.patches[place.patch].reflectance.max_element() > 0.0 {
+                    landed.push(Landing::new(place.patch, place.fan, place.weights));
                 }
             }
-        }
-        merged(read)
-    })
+            landed.shrink_to_fit();
+            landed
+        }))
+    }
+
+    /// Per corner, the mean over its rays of `reflected` (per corner of `mesh`) where they
+    /// land: the irradiance it gathers from surfaces over pi, W/m^2.
+    pub(super) fn read(&self, mesh: &Mesh, reflected: &[Rgb]) -> Vec<Rgb> {
+        self.0.map_rows(|row| {
+            let sum: Rgb = row.iter().map(|l| l.read(mesh, reflected)).sum();
+            sum / f64::from(BOUNCE_RAYS)
+        })
+    }
 }
 
 /// `normal` with the components that are zero up to rounding made exactly zero: the frame the
@@ -82,19 +131,4 @@ fn snapped(normal: DVec3) -> DVec3 {
         DVec3::ZERO,
         normal,
     )
-}
-
-/// `read` with the weights of each corner summed, by corner, in no more memory than that
-/// takes (a corner's rays mostly land on a few patches).
-fn merged(mut read: Vec<(u32, f32)>) -> Vec<(u32, f32)> {
-    read.sort_unstable_by_key(|&(c, _)| c);
-    read.dedup_by(|next, kept| {
-        let same = next.0 == kept.0;
-        if same {
-            kept.1 += next.1;
-        }
-        same
-    });
-    read.shrink_to_fit();
-    read
 }

@@ -73,33 +73,35 @@ pub(super) fn inset(corner: DVec3, inside: DVec3) -> DVec3 {
     corner + (inside - corner) * INSET
 }
 
-/// Per gather point, the values it reads and with what weight (point `i`'s are
-/// `entries[offsets[i]..offsets[i + 1]]`): the emitting faces a point sees and its factor to
-/// each (direct light), or the corners its rays land among (the bounce).
-pub(super) struct PointWeights {
+/// Per gather point, a list (point `i`'s is `entries[offsets[i]..offsets[i + 1]]`).
+pub(super) struct PointRows<T> {
     offsets: Vec<u32>,
-    entries: Vec<(u32, f32)>,
+    entries: Vec<T>,
 }
 
-impl PointWeights {
-    /// `count` points that read nothing.
-    pub(super) fn none(count: usize) -> PointWeights {
-        PointWeights {
+/// Per gather point, the values it reads and with what weight: the emitting faces a point sees
+/// and its factor to each (direct light).
+pub(super) type PointWeights = PointRows<(u32, f32)>;
+
+impl<T: Send> PointRows<T> {
+    /// `count` points with empty lists.
+    pub(super) fn none(count: usize) -> PointRows<T> {
+        PointRows {
             offsets: vec![0; count + 1],
             entries: Vec::new(),
         }
     }
 
-    /// Each of `points` reading what `weights` (its index, the point) gives, in parallel; a
-    /// `None` point reads nothing.
+    /// Each of `points` with the list `list` (its index, the point) gives, in parallel; a
+    /// `None` point gets an empty one.
     pub(super) fn at_points(
         points: &[Option<GatherPoint>],
-        weights: impl Fn(usize, &GatherPoint) -> Vec<(u32, f32)> + Sync,
-    ) -> PointWeights {
-        let per_point: Vec<Vec<(u32, f32)>> = points
+        list: impl Fn(usize, &GatherPoint) -> Vec<T> + Sync,
+    ) -> PointRows<T> {
+        let per_point: Vec<Vec<T>> = points
             .par_iter()
             .enumerate()
-            .map(|(index, point)| point.as_ref().map_or(Vec::new(), |p| weights(index, p)))
+            .map(|(index, point)| point.as_ref().map_or(Vec::new(), |p| list(index, p)))
             .collect();
         let mut offsets = Vec::with_capacity(per_point.len() + 1);
         offsets.push(0);
@@ -113,19 +115,27 @@ impl PointWeights {
         for list in per_point {
             entries.extend(list);
         }
-        PointWeights { offsets, entries }
+        PointRows { offsets, entries }
     }
+}
 
-    /// Per point, the weighted sum of the `values` it reads.
-    pub(super) fn read(&self, values: &[Rgb]) -> Vec<Rgb> {
+impl<T: Sync> PointRows<T> {
+    /// Per point, `fold` of its list, in parallel.
+    pub(super) fn map_rows(&self, fold: impl Fn(&[T]) -> Rgb + Sync) -> Vec<Rgb> {
         self.offsets
             .par_windows(2)
-            .map(|range| {
-                self.entries[range[0] as usize..range[1] as usize]
-                    .iter()
-                    .map(|&(index, weight)| values[index as usize] * weight as f64)
-                    .sum()
-            })
+            .map(|range| fold(&self.entries[range[0] as usize..range[1] as usize]))
             .collect()
+    }
+}
+
+impl PointWeights {
+    /// Per point, the weighted sum of the `values` it reads.
+    pub(super) fn read(&self, values: &[Rgb]) -> Vec<Rgb> {
+        self.map_rows(|row| {
+            row.iter()
+                .map(|&(index, weight)| values[index as usize] * weight as f64)
+                .sum()
+        })
     }
 }

@@ -10,11 +10,12 @@ use std::ops::Range;
 /// grid in their plane.
 const SCANNED_PATCHES: usize = 8;
 
-/// A point's place in the mesh: its patch, three of its corners and their interpolation
-/// weights.
+/// A point's place in the mesh: its patch, the fan triangle `(c0, ck, ck+1)` of it that holds
+/// the point (`fan` is `k`), that triangle's corners and their interpolation weights.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Place {
     pub(super) patch: usize,
+    pub(super) fan: usize,
     pub(super) corners: [u32; 3],
     pub(super) weights: [f64; 3],
 }
@@ -145,6 +146,7 @@ impl PatchLocator {
                 let corners = [ids[0], ids[k], ids[k + 1]];
                 let place = Place {
                     patch: i,
+                    fan: k,
                     corners,
                     weights,
                 };

@@ -13,10 +13,10 @@
 //! viewers show over a surface is its solved light (the Cornell box at 148 patches: energy
 //! −4.6% → −0.1%, smooth RMS 13% → 7.8%). On a hierarchy, whose links carry errors of their
 //! own, the indirect part is then gathered at the corner too: its last two bounces, read
-//! through rays from the corner ([`bounce`]). Everything is linear in each emitter's
-//! emission, so edits still superpose.
+//! through rays from the corner ([`bounce`](super::bounce)). Everything is linear in each
+//! emitter's emission, so edits still superpose.
 
-use super::bounce;
+use super::bounce::Landings;
 use super::gather_point::{GatherPoint, PointWeights, inset};
 use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
 use crate::mesh::Mesh;
@@ -50,12 +50,12 @@ struct RayBudget {
     penumbra: u32,
 }
 
-/// Bounces of indirect light gathered at the corners ([`bounce`]), each from the values the
-/// one before gave: the first reads the patches' solution through the corners' own
-/// visibility, the second reads the first. Measured (docs/BENCHMARKS.md): the Cornell box at
-/// knob 0.13, smooth RMS 3.89% with none, 1.85% with one, 1.61% with two, 1.56% with four;
-/// the monastery 13.04%, 10.58%, 10.24%. Each costs one product with the gather's sparse
-/// matrix, no rays.
+/// Bounces of indirect light gathered at the corners ([`bounce`](super::bounce)), each from
+/// the values the one before gave: the first reads the patches' solution through the corners'
+/// own visibility, the second reads the first. Measured (docs/BENCHMARKS.md): the Cornell box
+/// at knob 0.13, smooth RMS 3.89% with none, 1.85% with one, 1.61% with two, 1.56% with four;
+/// the monastery 13.04%, 10.58%, 10.24%. Each costs one reading of the rays' landings, no
+/// rays.
 const GATHERED_BOUNCES: usize = 2;
 
 /// Emitting faces beyond which corners gather none (their patches' values are averaged, as
@@ -77,9 +77,10 @@ pub enum CornerIndirect {
     /// light exactly to their mesh, and the gather's noise (64 rays: about 1.5% smooth RMS on
     /// the Cornell box) would pass that error from 1,200 patches on (docs/BENCHMARKS.md).
     Averaged,
-    /// The last bounces gathered at the corner ([`bounce`]). A hierarchy's links carry sampled
-    /// cluster factors, pairs dropped as hidden and leaves coarse for the light across them:
-    /// gathered, their errors reach viewers only through one more reflection.
+    /// The last bounces gathered at the corner ([`bounce`](super::bounce)). A hierarchy's
+    /// links carry sampled cluster factors, pairs dropped as hidden and leaves coarse for the
+    /// light across them: gathered, their errors reach viewers only through one more
+    /// reflection.
     Gathered,
 }
 
@@ -98,9 +99,9 @@ pub struct CornerLight {
     /// Where the corners' indirect light comes from.
     indirect: CornerIndirect,
     /// Per corner, the corners its rays for the last bounces of indirect light read
-    /// ([`bounce::landings`]), when they are gathered and so is direct light (the bounces
-    /// read reflected light only; the direct light is the corners' own).
-    bounce: Option<PointWeights>,
+    /// ([`Landings`]), when they are gathered and so is direct light (the bounces read
+    /// reflected light only; the direct light is the corners' own).
+    bounce: Option<Landings>,
     /// Per patch and corner slot: whether light reaches the patch at the point
     /// [`INSET`](super::gather_point::INSET) of the way in from that corner (not under a box
     /// standing on the floor: [`Occluders::is_buried`]).
@@ -178,7 +179,7 @@ impl CornerLight {
         let centroids = GatherPoint::centroids_of(mesh);
         if self.indirect == CornerIndirect::Gathered && self.bounce.is_none() {
             let faces = scene.faces.len();
-            self.bounce = Some(bounce::landings(mesh, &corner_points, occluders, faces));
+            self.bounce = Some(Landings::cast(mesh, &corner_points, occluders, faces));
         }
         // Per point, the emitting faces it sees and its form factor to each, visibility
         // included; the centroids' rays are seeded apart from the corners'.
@@ -283,7 +284,7 @@ impl CornerLight {
                 let reflected: Vec<Rgb> = (values.iter().zip(&surface))
                     .map(|(value, surface)| surface.map_or(Rgb::ZERO, |(e, _)| *value - e))
                     .collect();
-                let gathered = bounce.read(&reflected);
+                let gathered = bounce.read(mesh, &reflected);
                 values = values_with(&|c| {
                     surface[c].map_or(Rgb::ZERO, |(_, reflectance)| reflectance * gathered[c])
                 });
@@ -522,7 +523,7 @@ mod tests {
             .position(|p| p.distance(dvec3(1.0, 0.0, 1.0)) < 1e-12)
             .expect("a floor vertex under the plate's centre");
         let bounce = light.bounce.as_ref().expect("direct light is gathered");
-        let got = bounce.read(&reflected)[corner].x;
+        let got = bounce.read(&mesh, &reflected)[corner].x;
         let expected = 4.0 * howell_b3(1.0, 1.0, 1.0);
         println!("gathered {got} against 4 x Howell B-3 {expected}");
         // Independent cosine rays would be off by sqrt(F (1 - F) / rays), 3.5 rays' worth at
