@@ -13,7 +13,7 @@
 //! each ray landed is kept (8 bytes a ray), once per mesh, and serves every emission edit.
 
 use super::gather_point::{GatherPoint, PointRows};
-use super::locator::PatchLocator;
+use super::locator::{PatchLocator, fan_corners};
 use crate::mesh::Mesh;
 use crate::sampling::{cosine_direction, pair_seed, stratified_uv};
 use crate::scene::Rgb;
@@ -63,8 +63,8 @@ impl Landing {
             1
         };
         let [w1, w2] = self.weights.map(|w| f64::from(w) / f64::from(u16::MAX));
-        let at = |slot: usize| values[patch.corners[slot] as usize];
-        at(0) * (1.0 - w1 - w2) + at(k) * w1 + at(k + 1) * w2
+        let [c0, c1, c2] = fan_corners(patch, k).map(|c| values[c as usize]);
+        c0 * (1.0 - w1 - w2) + c1 * w1 + c2 * w2
     }
 }
 

@@ -2,7 +2,7 @@
 //! the face sees of a solution (its corners' values interpolated as viewers show them).
 
 use crate::geometry::fan_weights;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, Patch};
 use glam::{DVec2, DVec3};
 use std::ops::Range;
 
@@ -11,13 +11,17 @@ use std::ops::Range;
 const SCANNED_PATCHES: usize = 8;
 
 /// A point's place in the mesh: its patch, the fan triangle `(c0, ck, ck+1)` of it that holds
-/// the point (`fan` is `k`), that triangle's corners and their interpolation weights.
+/// the point (`fan` is `k`), and the interpolation weights of that triangle's corners.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Place {
     pub(super) patch: usize,
     pub(super) fan: usize,
-    pub(super) corners: [u32; 3],
     pub(super) weights: [f64; 3],
+}
+
+/// The corners of `patch`'s fan triangle `(c0, ck, ck+1)`, `k` = `fan`.
+pub(super) fn fan_corners(patch: &Patch, fan: usize) -> [u32; 3] {
+    [patch.corners[0], patch.corners[fan], patch.corners[fan + 1]]
 }
 
 /// A uniform grid over one face's patches in the face's plane: each cell lists the patches
@@ -143,11 +147,9 @@ impl PatchLocator {
             }
             let (k, weights, inside) = fan_weights(&positions[..ids.len()], x);
             if best.is_none_or(|(b, _)| inside > b) {
-                let corners = [ids[0], ids[k], ids[k + 1]];
                 let place = Place {
                     patch: i,
                     fan: k,
-                    corners,
                     weights,
                 };
                 best = Some((inside, place));
@@ -166,7 +168,7 @@ impl PatchLocator {
 
 #[cfg(test)]
 mod tests {
-    use super::{PatchLocator, SCANNED_PATCHES};
+    use super::{PatchLocator, SCANNED_PATCHES, fan_corners};
     use crate::hierarchy::fixtures::{GREY, add_parallelogram};
     use crate::mesh::{Mesh, PatchTarget};
     use crate::sampling::stratified_uv;
@@ -194,13 +196,14 @@ mod tests {
                 let x = origin + u * s + v * t;
                 let place = locator.place(&mesh, face, x).expect("the face has patches");
                 assert_eq!(mesh.patches[place.patch].face, face);
-                let rebuilt: DVec3 = (place.corners.iter().zip(place.weights))
+                let corners = fan_corners(&mesh.patches[place.patch], place.fan);
+                let rebuilt: DVec3 = (corners.iter().zip(place.weights))
                     .map(|(&c, w)| mesh.positions[c as usize] * w)
                     .sum();
                 assert!(rebuilt.distance(x) < 1e-9, "{x} placed at {rebuilt}");
                 assert!(place.weights.iter().all(|&w| w >= -1e-9), "{place:?}");
                 let ids = &mesh.patches[place.patch].corners;
-                assert!(place.corners.iter().all(|c| ids.contains(c)));
+                assert!(corners.iter().all(|c| ids.contains(c)));
             }
         }
     }
