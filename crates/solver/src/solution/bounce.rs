@@ -68,23 +68,59 @@ impl Landing {
     }
 }
 
-/// Per corner, where its bounce's rays landed on faces that reflect light.
-pub(super) struct Landings(PointRows<Landing>);
+/// Per gather point, where its rays landed on faces that reflect light.
+struct Landings(PointRows<Landing>);
 
-impl Landings {
-    /// Casts the bounce's rays from each of `points` (one per corner of `mesh`; `None`: a
-    /// corner no patch uses) and records where they land. A ray that escapes, meets the back
-    /// of a face (from inside a wall it reads nothing), or a face that reflects nothing (a
-    /// sky, at any edit), gathers nothing.
+/// Where the bounce's rays landed from each mesh corner and from each patch's centroid. The
+/// centroids' gathers say what interpolating the corners' misses over each patch, as for the
+/// direct light (`vertices`): a sliver of soup lit at its ends and shaded in its middle, or
+/// the reverse, holds its light on average (the teddy bear: 2.80 -> 2.10% smooth RMS).
+pub(super) struct BounceLandings {
+    corners: Landings,
+    centres: Landings,
+}
+
+impl BounceLandings {
+    /// Casts the bounce's rays from `corners` (one per corner of `mesh`; `None`: a corner no
+    /// patch uses) and from `centroids` (one per patch), and records where they land.
     pub(super) fn cast(
         mesh: &Mesh,
-        points: &[Option<GatherPoint>],
+        corners: &[Option<GatherPoint>],
+        centroids: &[Option<GatherPoint>],
         occluders: &Occluders,
         face_count: usize,
-    ) -> Landings {
+    ) -> BounceLandings {
         let locator = PatchLocator::new(mesh, face_count);
+        BounceLandings {
+            corners: Landings::cast(mesh, &locator, corners, 0, occluders),
+            centres: Landings::cast(mesh, &locator, centroids, corners.len(), occluders),
+        }
+    }
+
+    /// Per corner and per patch centroid, the mean over its rays of `reflected` (per corner
+    /// of `mesh`) where they land: the irradiance it gathers from surfaces over pi, W/m^2.
+    pub(super) fn read(&self, mesh: &Mesh, reflected: &[Rgb]) -> (Vec<Rgb>, Vec<Rgb>) {
+        (
+            self.corners.read(mesh, reflected),
+            self.centres.read(mesh, reflected),
+        )
+    }
+}
+
+impl Landings {
+    /// Casts [`BOUNCE_RAYS`] from each of `points` (the first seeded as point
+    /// `first_index`) and records where they land. A ray that escapes, meets the back of a
+    /// face (from inside a wall it reads nothing), or a face that reflects nothing (a sky, at
+    /// any edit), gathers nothing.
+    fn cast(
+        mesh: &Mesh,
+        locator: &PatchLocator,
+        points: &[Option<GatherPoint>],
+        first_index: usize,
+        occluders: &Occluders,
+    ) -> Landings {
         Landings(PointRows::at_points(points, |index, point| {
-            let seed = pair_seed(index, BOUNCE_SEED);
+            let seed = pair_seed(first_index + index, BOUNCE_SEED);
             let normal = snapped(point.normal);
             let mut landed = Vec::new();
             for k in 0..BOUNCE_RAYS {
@@ -110,9 +146,9 @@ impl Landings {
         }))
     }
 
-    /// Per corner, the mean over its rays of `reflected` (per corner of `mesh`) where they
-    /// land: the irradiance it gathers from surfaces over pi, W/m^2.
-    pub(super) fn read(&self, mesh: &Mesh, reflected: &[Rgb]) -> Vec<Rgb> {
+    /// Per point, the mean over its rays of `reflected` (per corner of `mesh`) where they
+    /// land.
+    fn read(&self, mesh: &Mesh, reflected: &[Rgb]) -> Vec<Rgb> {
         self.0.map_rows(|row| {
             let sum: Rgb = row.iter().map(|l| l.read(mesh, reflected)).sum();
             sum / f64::from(BOUNCE_RAYS)
