@@ -3,10 +3,10 @@
 //! The occluders are the scene's input faces (not the patches), in obvhs's compressed wide BVH,
 //! chosen by measurement (docs/BENCHMARKS.md). Coordinates are re-centred on the scene and scaled
 //! by a power of two about its size before the conversion to f32, so a scene far from the
-//! origin keeps its precision and one of any size meets the same arithmetic. Built with the
-//! `embree` feature, Intel Embree 3 ([`embree`]) is the index instead.
+//! origin keeps its precision and one of any size meets the same arithmetic. Built where Intel
+//! Embree 3 is installed (`build.rs`), it ([`embree`]) is the index instead.
 
-#[cfg(feature = "embree")]
+#[cfg(embree)]
 #[allow(unsafe_code)]
 mod embree;
 
@@ -70,17 +70,17 @@ pub enum RayBackend {
     Bvh2,
     /// Every face tested against every segment.
     Linear,
-    /// Intel Embree 3 (the default with the `embree` feature).
-    #[cfg(feature = "embree")]
+    /// Intel Embree 3 (the default where it is installed: `build.rs`).
+    #[cfg(embree)]
     Embree,
 }
 
 impl RayBackend {
-    /// The fastest one built in: Embree with the `embree` feature, else obvhs's CWBVH.
-    #[cfg(feature = "embree")]
+    /// The fastest one built in: Embree where it is installed, else obvhs's CWBVH.
+    #[cfg(embree)]
     pub const DEFAULT: RayBackend = RayBackend::Embree;
-    /// The fastest one built in: Embree with the `embree` feature, else obvhs's CWBVH.
-    #[cfg(not(feature = "embree"))]
+    /// The fastest one built in: Embree where it is installed, else obvhs's CWBVH.
+    #[cfg(not(embree))]
     pub const DEFAULT: RayBackend = RayBackend::CwBvh;
 
     /// Every backend built in.
@@ -89,7 +89,7 @@ impl RayBackend {
             RayBackend::CwBvh,
             RayBackend::Bvh2,
             RayBackend::Linear,
-            #[cfg(feature = "embree")]
+            #[cfg(embree)]
             RayBackend::Embree,
         ]
         .to_vec()
@@ -102,7 +102,7 @@ enum Index {
     Linear,
     /// The Embree scene, and each scene face's place among the indexed ones (its primitive id
     /// there; `u32::MAX` for a face not indexed).
-    #[cfg(feature = "embree")]
+    #[cfg(embree)]
     Embree(embree::Scene, Vec<u32>),
 }
 
@@ -236,7 +236,7 @@ impl Occluders {
             }
             RayBackend::Bvh2 => Index::Bvh2(build_bvh2(&boxes, params, &mut Duration::default())),
             RayBackend::Linear => Index::Linear,
-            #[cfg(feature = "embree")]
+            #[cfg(embree)]
             RayBackend::Embree => {
                 let quads: Vec<_> = indexed
                     .iter()
@@ -310,7 +310,7 @@ impl Occluders {
                 .indexed
                 .iter()
                 .for_each(|&face| consider(face, hit(&ray, face))),
-            #[cfg(feature = "embree")]
+            #[cfg(embree)]
             Index::Embree(scene, places) => {
                 let own = places.get(ignore as usize).copied().unwrap_or(u32::MAX);
                 if let Some((place, t)) = scene.first_hit(ray.origin, ray.direction, ray.tmin, own)
@@ -399,7 +399,7 @@ impl Occluders {
                 .indexed
                 .iter()
                 .all(|&face| hit(&ray, face) == f32::INFINITY),
-            #[cfg(feature = "embree")]
+            #[cfg(embree)]
             Index::Embree(scene, places) => {
                 let place = |f: u32| places.get(f as usize).copied().unwrap_or(u32::MAX);
                 scene.is_clear(
