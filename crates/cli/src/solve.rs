@@ -166,7 +166,10 @@ fn print_summary(scene: &std::path::Path, r: &SolveReport) {
         r.objects.len(),
         r.triangles
     );
-    println!("patches     {}  ({} shadow rays)", r.patches, r.rays);
+    println!(
+        "patches     {}  ({} shadow rays, {})",
+        r.patches, r.rays, r.ray_backend
+    );
     if let Some(h) = &r.hierarchy {
         println!(
             "hierarchy   {} links ({:.1} per leaf), {} clusters, {} rounds, {} links decided by the shaft alone",

@@ -55,6 +55,9 @@ pub struct SolveReport {
     pub tolerance: f64,
     /// Shadow rays cast for form factors.
     pub rays: u64,
+    /// What cast every ray: `embree` where Intel Embree 3 was installed at build time, else
+    /// `obvhs-cwbvh` (`crates/solver/build.rs`).
+    pub ray_backend: &'static str,
     /// Seconds per stage.
     pub seconds: StageSeconds,
     /// Per object, in scene order.

@@ -797,6 +797,7 @@ impl Session {
             residual,
             converged,
             tolerance: self.request.solver.tolerance,
+            ray_backend: crate::visibility::RayBackend::DEFAULT.name(),
             rays: match &self.factors {
                 Factors::Dense(factors) => factors.rays_cast,
                 Factors::Hierarchy(hierarchy) => hierarchy.stats().rays,

@@ -83,6 +83,17 @@ impl RayBackend {
     #[cfg(not(embree))]
     pub const DEFAULT: RayBackend = RayBackend::CwBvh;
 
+    /// Its name in reports: `embree`, `obvhs-cwbvh`, `obvhs-bvh2` or `linear`.
+    pub fn name(self) -> &'static str {
+        match self {
+            RayBackend::CwBvh => "obvhs-cwbvh",
+            RayBackend::Bvh2 => "obvhs-bvh2",
+            RayBackend::Linear => "linear",
+            #[cfg(embree)]
+            RayBackend::Embree => "embree",
+        }
+    }
+
     /// Every backend built in.
     pub fn all() -> Vec<RayBackend> {
         [
