@@ -54,6 +54,9 @@ pub struct SolveReport {
     pub tolerance: f64,
     /// Shadow rays cast.
     pub rays: u64,
+    /// What cast them: `embree` or `obvhs-cwbvh` (empty from a server that did not say).
+    #[serde(default)]
+    pub ray_backend: String,
     /// Wall-clock seconds per stage.
     pub seconds: StageSeconds,
     /// Per object of the scene, in file order.

@@ -146,6 +146,7 @@ pub fn report_for_viewers(report: &solver::SolveReport) -> SolveReport {
         converged: report.converged,
         tolerance: report.tolerance,
         rays: report.rays,
+        ray_backend: report.ray_backend.into(),
         seconds: StageSeconds {
             load: s.load,
             mesh: s.mesh,
