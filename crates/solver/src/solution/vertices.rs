@@ -545,12 +545,10 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_vertex_under_a_reflecting_plate_gathers_its_view_factor() {
-        // A 2 x 2 floor meshed at 0.5 (a vertex at (1, 0, 1)) under a 2 x 2 plate facing down,
-        // 1 above and centred on that vertex. Whatever the plate reflects, uniformly, the
-        // vertex gathers times its factor to the plate: four times Howell's B-3 for 1 x 1 at 1
-        // (0.5541).
+    /// A grey 2 x 2 floor (face 0) meshed at 0.5 under an equal grey plate facing down 1
+    /// above (face 1), its corners' light gathered with the bounce; and, per corner, 1
+    /// reflected by the plate's and nothing by the floor's.
+    fn floor_under_a_reflecting_plate() -> (Mesh, CornerLight, Vec<Rgb>) {
         let mut scene = Scene::default();
         let (x, z) = (DVec3::X, DVec3::Z);
         add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z * 2.0, x * 2.0), GREY);
@@ -565,6 +563,16 @@ mod tests {
                 reflected[c as usize] = Rgb::ONE;
             }
         }
+        (mesh, light, reflected)
+    }
+
+    #[test]
+    fn a_vertex_under_a_reflecting_plate_gathers_its_view_factor() {
+        // A 2 x 2 floor meshed at 0.5 (a vertex at (1, 0, 1)) under a 2 x 2 plate facing down,
+        // 1 above and centred on that vertex. Whatever the plate reflects, uniformly, the
+        // vertex gathers times its factor to the plate: four times Howell's B-3 for 1 x 1 at 1
+        // (0.5541).
+        let (mesh, light, reflected) = floor_under_a_reflecting_plate();
         let corner = (mesh.positions.iter())
             .position(|p| p.distance(dvec3(1.0, 0.0, 1.0)) < 1e-12)
             .expect("a floor vertex under the plate's centre");
@@ -588,20 +596,7 @@ mod tests {
         // factor to the plate: Howell's C-11 for X = Y = 2 (0.4153). The factor is a dome,
         // highest at the centre: interpolated from the corners, each patch misses its
         // curvature; the centroids' gathers put it back.
-        let mut scene = Scene::default();
-        let (x, z) = (DVec3::X, DVec3::Z);
-        add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z * 2.0, x * 2.0), GREY);
-        add_parallelogram(&mut scene, "plate", (DVec3::Y, x * 2.0, z * 2.0), GREY);
-        let mesh = Mesh::build(&scene, PatchTarget::EdgeLength(0.5));
-        let occluders = Occluders::new(&scene);
-        let gathered = super::CornerIndirect::Gathered;
-        let light = CornerLight::new(&scene, &mesh, &occluders, &BTreeSet::new(), gathered);
-        let mut reflected = vec![Rgb::ZERO; mesh.positions.len()];
-        for patch in mesh.patches.iter().filter(|p| p.face == 1) {
-            for &c in &patch.corners[..patch.corner_count()] {
-                reflected[c as usize] = Rgb::ONE;
-            }
-        }
+        let (mesh, light, reflected) = floor_under_a_reflecting_plate();
         let bounce = light.bounce.as_ref().expect("direct light is gathered");
         let (at_corners, at_centres) = bounce.read(&mesh, &reflected);
         let missed = light.missed_by_interpolation(&mesh, &at_corners, &at_centres);
