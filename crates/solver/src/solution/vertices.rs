@@ -20,7 +20,7 @@
 use super::bounce::BounceLandings;
 use super::gather_point::{GatherPoint, PointWeights, inset};
 use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, Patch};
 use crate::sampling::{pair_seed, stratified_uv};
 use crate::scene::{Rgb, Scene};
 use crate::transport::Transport;
@@ -240,22 +240,17 @@ impl CornerLight {
         }
         let direct = self.corners.read(&face_emission);
         let centre_direct = self.centres.read(&face_emission);
-        // Per corner: the area-weighted sum, over the patches around it that light reaches, of
-        // their indirect light, and that area.
-        let mut sums = vec![(Rgb::ZERO, 0.0); mesh.positions.len()];
         // Per corner, its face's emission and reflectance; `None` for a corner no patch uses.
         let mut surface = vec![None; mesh.positions.len()];
         for (i, patch) in mesh.patches.iter().enumerate() {
-            let indirect = radiosity[i] - emission[i] - patch.reflectance * direct_gathered[i];
-            for (slot, &c) in patch.corners[..patch.corner_count()].iter().enumerate() {
-                let sum = &mut sums[c as usize];
-                if self.reached[i][slot] {
-                    sum.0 += indirect * patch.area;
-                    sum.1 += patch.area;
-                }
+            for &c in &patch.corners[..patch.corner_count()] {
                 surface[c as usize] = Some((emission[i], patch.reflectance));
             }
         }
+        // Per corner, the mean over the patches around it of their indirect light.
+        let averaged_indirect = self.reached_mean(mesh, |i, patch| {
+            radiosity[i] - emission[i] - patch.reflectance * direct_gathered[i]
+        });
         // Where the direct light curves over a patch, its corners' values interpolated miss
         // part of it (most at a wall's top edge, where it rises from zero): that part goes
         // into the corners, so the smooth reading keeps the patch's energy.
@@ -277,8 +272,7 @@ impl CornerLight {
                 })
                 .collect()
         };
-        let mean = |(sum, area): (Rgb, f64)| if area > 0.0 { sum / area } else { Rgb::ZERO };
-        let mut values = values_with(&|c| mean(sums[c]));
+        let mut values = values_with(&|c| averaged_indirect[c]);
         // The last bounces gathered at the corners and the patches' centroids, each reading
         // the values the one before gave, instead of the patches' indirect light; what
         // interpolating the corners' gathers misses over each patch goes into its corners as
@@ -309,16 +303,24 @@ impl CornerLight {
         at_corners: &[Rgb],
         at_centres: &[Rgb],
     ) -> Vec<Rgb> {
+        self.reached_mean(mesh, |i, patch| {
+            let ids = &patch.corners[..patch.corner_count()];
+            patch.reflectance
+                * (second_order_mean(ids, at_corners, at_centres[i])
+                    - interpolated_mean(mesh, ids, at_corners))
+        })
+    }
+
+    /// Per corner of `mesh`, the area-weighted mean of `per_patch` (its index, the patch) over
+    /// the patches around it that light reaches there; zero where none does.
+    fn reached_mean(&self, mesh: &Mesh, per_patch: impl Fn(usize, &Patch) -> Rgb) -> Vec<Rgb> {
         let mut sums = vec![(Rgb::ZERO, 0.0); mesh.positions.len()];
         for (i, patch) in mesh.patches.iter().enumerate() {
-            let ids = &patch.corners[..patch.corner_count()];
-            let missed = patch.reflectance
-                * (second_order_mean(ids, at_corners, at_centres[i])
-                    - interpolated_mean(mesh, ids, at_corners));
-            for (slot, &c) in ids.iter().enumerate() {
+            let value = per_patch(i, patch);
+            for (slot, &c) in patch.corners[..patch.corner_count()].iter().enumerate() {
                 if self.reached[i][slot] {
                     let sum = &mut sums[c as usize];
-                    sum.0 += missed * patch.area;
+                    sum.0 += value * patch.area;
                     sum.1 += patch.area;
                 }
             }
