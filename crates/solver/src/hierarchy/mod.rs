@@ -271,6 +271,43 @@ impl Hierarchy {
         self.index_links_and_slopes();
     }
 
+    /// Whether the `i`-th leaf (as [`Hierarchy::leaf_mesh`] lists them) is larger than the
+    /// smallest element, of radius `finest_radius` ([`finest_radius`]).
+    pub fn can_split_leaf(&self, i: usize, finest_radius: f64) -> bool {
+        refine::can_split_to(
+            &self.tree.nodes[self.tree.leaves[i] as usize],
+            finest_radius,
+        )
+    }
+
+    /// Splits the leaves `chosen` (their indices, as [`Hierarchy::leaf_mesh`] lists them) for
+    /// what viewers see alone: no link changes, so each piece receives what its parent's links
+    /// bring, pushed down, and the solution keeps its light and its links; viewers get corners
+    /// where the light across a leaf needs them. Pieces that straddle the edge of where light
+    /// reaches split on as refinement's do, to `finest_radius` within `max_leaves`. Returns
+    /// `radiosity` (per leaf) carried to the new leaves.
+    pub fn split_for_display(
+        &mut self,
+        chosen: &[usize],
+        radiosity: &[Rgb],
+        occluders: &Occluders,
+        finest_radius: f64,
+        max_leaves: usize,
+    ) -> Vec<Rgb> {
+        let (before, inherited) = (self.tree.nodes.len(), self.pull(radiosity));
+        for &i in chosen {
+            self.tree.subdivide(self.tree.leaves[i]);
+        }
+        self.split_where_reach_ends(occluders, finest_radius, max_leaves);
+        self.inherit(inherited, before)
+    }
+
+    /// The mean reflected radiosity (largest channel) over the area light reaches, W/m^2, of
+    /// the solution `radiosity` (per leaf): the scale relative errors are measured against.
+    pub fn mean_reflected(&self, radiosity: &[Rgb]) -> f64 {
+        self.reach.mean_reflected(&self.tree, radiosity)
+    }
+
     /// Rebuilds the link operator (and the stats) on the leaves as listed and measured.
     fn index_links_and_slopes(&mut self) {
         self.fit_slopes();
@@ -413,7 +450,7 @@ impl<'a> Rounds<'a> {
             progress,
             max_rounds: settings.max_rounds,
             estimate: ambient_estimate(scene),
-            finest_radius: refine::finest_radius(receiving_area(scene), settings.max_leaves),
+            finest_radius: finest_radius(scene, settings.max_leaves),
         }
     }
 
@@ -497,6 +534,12 @@ impl<'a> Rounds<'a> {
             radiosity,
         })
     }
+}
+
+/// The smallest element radius the leaf budget `max_leaves` affords everywhere in `scene`
+/// ([`refine::finest_radius`]).
+pub fn finest_radius(scene: &Scene, max_leaves: usize) -> f64 {
+    refine::finest_radius(receiving_area(scene), max_leaves)
 }
 
 /// The area of the faces that reflect light, scene units squared.

@@ -4,6 +4,7 @@
 //! scene file to a solved scene ([`pipeline`]).
 
 mod bounce;
+mod display;
 mod gather_point;
 mod locator;
 pub mod pipeline;

@@ -1,6 +1,7 @@
 //! A solved scene kept live for edits: emission changes by superposition, moves by updating
 //! only the form factors they can change (or rebuilding a hierarchy).
 
+use super::display::{Displayed, split_where_direct_light_curves};
 use super::report::{ObjectRadiosity, SolveReport, StageSeconds};
 use super::request::{SolveError, SolveRequest, check_dense_size};
 use super::vertices::{CornerIndirect, CornerLight, clamp_below_zero};
@@ -176,12 +177,15 @@ impl Session {
         let clock = Instant::now();
         let form_factors =
             DenseFormFactors::compute(mesh, &occluders, &request.form_factors, progress);
+        let lights = lit_objects(scene);
+        let averaged = CornerIndirect::Averaged;
+        let corner_light = CornerLight::new(scene, mesh, &occluders, &lights, averaged);
         seconds.form_factors = clock.elapsed().as_secs_f64();
         Ok(Session::assemble(
             scene.clone(),
             mesh.clone(),
             Factors::Dense(form_factors),
-            &occluders,
+            corner_light,
             request,
             seconds,
             vec![Rgb::ZERO; n],
@@ -221,15 +225,13 @@ impl Session {
             progress,
         )?;
         seconds.form_factors = clock.elapsed().as_secs_f64();
-        let mesh = hierarchy.leaf_mesh();
-        Ok(Session::assemble(
+        Ok(Session::on_hierarchy(
             scene.clone(),
-            mesh,
-            Factors::Hierarchy(Box::new(hierarchy)),
+            hierarchy,
+            radiosity,
             &occluders,
             request,
             seconds,
-            radiosity,
         ))
     }
 
@@ -279,7 +281,6 @@ impl Session {
             progress,
         )?;
         seconds.form_factors += clock.elapsed().as_secs_f64();
-        let mesh = hierarchy.leaf_mesh();
         // Refined to `knob` now: a move rebuilds the hierarchy at it.
         let request = SolveRequest {
             hierarchy: Some(HierarchySettings {
@@ -288,43 +289,53 @@ impl Session {
             }),
             ..request
         };
-        let session = Session::assemble(
-            scene,
-            mesh,
-            Factors::Hierarchy(Box::new(hierarchy)),
-            &occluders,
-            &request,
-            seconds,
-            radiosity,
-        );
+        let session =
+            Session::on_hierarchy(scene, hierarchy, radiosity, &occluders, &request, seconds);
         Ok((session, true))
+    }
+
+    /// A session on `hierarchy`, built from `scene` and solved as `radiosity` (per leaf), its
+    /// leaves split where viewers would miss the direct light's shape across them
+    /// ([`display`](super::display)) and its corners' light gathered; the time it takes counts
+    /// as form factors.
+    fn on_hierarchy(
+        scene: Scene,
+        mut hierarchy: Hierarchy,
+        radiosity: Vec<Rgb>,
+        occluders: &Occluders,
+        request: &SolveRequest,
+        mut seconds: StageSeconds,
+    ) -> Session {
+        let clock = Instant::now();
+        let Displayed {
+            mesh,
+            radiosity,
+            light,
+        } = split_where_direct_light_curves(
+            &mut hierarchy,
+            radiosity,
+            &scene,
+            occluders,
+            &request.hierarchy.unwrap_or_default(),
+            &lit_objects(&scene),
+        );
+        seconds.form_factors += clock.elapsed().as_secs_f64();
+        let factors = Factors::Hierarchy(Box::new(hierarchy));
+        Session::assemble(scene, mesh, factors, light, request, seconds, radiosity)
     }
 
     fn assemble(
         scene: Scene,
         mesh: Mesh,
         factors: Factors,
-        occluders: &Occluders,
+        corner_light: CornerLight,
         request: &SolveRequest,
         seconds: StageSeconds,
         radiosity: Vec<Rgb>,
     ) -> Session {
         let column =
             |f: fn(&crate::mesh::Patch) -> Rgb| mesh.patches.iter().map(f).collect::<Vec<_>>();
-        let clock = Instant::now();
-        let lights: BTreeSet<u32> = scene
-            .faces
-            .iter()
-            .filter(|f| f.emission.max_element() > 0.0)
-            .map(|f| f.object)
-            .collect();
-        let indirect = match &factors {
-            Factors::Dense(_) => CornerIndirect::Averaged,
-            Factors::Hierarchy(_) => CornerIndirect::Gathered,
-        };
-        let corner_light = CornerLight::new(&scene, &mesh, occluders, &lights, indirect);
-        let mut seconds = seconds;
-        seconds.form_factors += clock.elapsed().as_secs_f64();
+        let lights = lit_objects(&scene);
         Session {
             objects: scene.objects.iter().map(|o| o.name.clone()).collect(),
             patch_objects: mesh.patches.iter().map(|p| p.object).collect(),
@@ -822,6 +833,14 @@ impl Session {
             target: None,
         }
     }
+}
+
+/// The objects of `scene` with a face that emits.
+fn lit_objects(scene: &Scene) -> BTreeSet<u32> {
+    (scene.faces.iter())
+        .filter(|f| f.emission.max_element() > 0.0)
+        .map(|f| f.object)
+        .collect()
 }
 
 /// `values += emission * unit - original`: one object's response moved from its original

@@ -179,14 +179,7 @@ impl CornerLight {
         let corner_points = GatherPoint::corners_of(mesh);
         let centroids = GatherPoint::centroids_of(mesh);
         if self.indirect == CornerIndirect::Gathered && self.bounce.is_none() {
-            let faces = scene.faces.len();
-            self.bounce = Some(BounceLandings::cast(
-                mesh,
-                &corner_points,
-                &centroids,
-                occluders,
-                faces,
-            ));
+            self.cast_bounce(scene, mesh, occluders, (&corner_points, &centroids));
         }
         // Per point, the emitting faces it sees and its form factor to each, visibility
         // included; the centroids' rays are seeded apart from the corners'.
@@ -196,6 +189,40 @@ impl CornerLight {
         self.centres = PointWeights::at_points(&centroids, |index, point| {
             seen_factors(point, &emitters, occluders, mesh.positions.len() + index)
         });
+    }
+
+    /// This light, built with [`CornerIndirect::Averaged`] on the same `scene` and `mesh`,
+    /// with its indirect light [`CornerIndirect::Gathered`]: the direct light gathered and
+    /// where light reaches are kept, the bounce's rays cast.
+    pub fn with_gathered_bounces(
+        mut self,
+        scene: &Scene,
+        mesh: &Mesh,
+        occluders: &Occluders,
+    ) -> CornerLight {
+        self.indirect = CornerIndirect::Gathered;
+        if self.gathered && self.bounce.is_none() {
+            let (corners, centroids) = (
+                GatherPoint::corners_of(mesh),
+                GatherPoint::centroids_of(mesh),
+            );
+            self.cast_bounce(scene, mesh, occluders, (&corners, &centroids));
+        }
+        self
+    }
+
+    /// Casts the bounce's rays from `corners` and `centroids` of `mesh`.
+    fn cast_bounce(
+        &mut self,
+        scene: &Scene,
+        mesh: &Mesh,
+        occluders: &Occluders,
+        (corners, centroids): (&[Option<GatherPoint>], &[Option<GatherPoint>]),
+    ) {
+        let faces = scene.faces.len();
+        self.bounce = Some(BounceLandings::cast(
+            mesh, corners, centroids, occluders, faces,
+        ));
     }
 
     /// Radiosity at every corner of `mesh`, W/m^2, for the patch solution `radiosity` under
@@ -227,17 +254,7 @@ impl CornerLight {
         if self.gathered {
             transport.gather(emission, &mut direct_gathered);
         }
-        let mut face_emission = vec![
-            Rgb::ZERO;
-            mesh.patches
-                .iter()
-                .map(|p| p.face as usize + 1)
-                .max()
-                .unwrap_or(0)
-        ];
-        for (i, patch) in mesh.patches.iter().enumerate() {
-            face_emission[patch.face as usize] = emission[i];
-        }
+        let face_emission = face_emission(mesh, emission);
         let direct = self.corners.read(&face_emission);
         let centre_direct = self.centres.read(&face_emission);
         // Per corner, its face's emission and reflectance; `None` for a corner no patch uses.
@@ -294,6 +311,32 @@ impl CornerLight {
         values
     }
 
+    /// Per patch of `mesh` under the patches' `emission`, how far the direct light its centroid
+    /// reflects lies from the mean of what its corners reflect (what interpolating them shows
+    /// near its middle), W/m^2, largest channel: where the direct light across the patch has
+    /// a shape that linear interpolation of its corners misses (a penumbra, a shadow's edge,
+    /// the peak under a lamp). Zero everywhere when direct light is not gathered.
+    pub fn direct_misfit(&self, mesh: &Mesh, emission: &[Rgb]) -> Vec<f64> {
+        if !self.gathered {
+            return vec![0.0; mesh.patches.len()];
+        }
+        let face_emission = face_emission(mesh, emission);
+        let (corners, centres) = (
+            self.corners.read(&face_emission),
+            self.centres.read(&face_emission),
+        );
+        (mesh.patches.par_iter().zip(&centres))
+            .map(|(patch, &centre)| {
+                let ids = &patch.corners[..patch.corner_count()];
+                let corner_mean: Rgb =
+                    ids.iter().map(|&c| corners[c as usize]).sum::<Rgb>() / ids.len() as f64;
+                (patch.reflectance * (centre - corner_mean))
+                    .abs()
+                    .max_element()
+            })
+            .collect()
+    }
+
     /// Per corner, the area-weighted mean over the patches around it that light reaches of
     /// what interpolating a light known `at_corners` and `at_centres` (irradiance over pi,
     /// W/m^2) misses of its second-order mean over each patch, reflected.
@@ -329,6 +372,17 @@ impl CornerLight {
             .map(|(sum, area)| if area > 0.0 { sum / area } else { Rgb::ZERO })
             .collect()
     }
+}
+
+/// Per input face of `mesh`, the `emission` of its patches (one per patch): what the direct
+/// light's weights read.
+fn face_emission(mesh: &Mesh, emission: &[Rgb]) -> Vec<Rgb> {
+    let faces = mesh.patches.iter().map(|p| p.face as usize + 1).max();
+    let mut face_emission = vec![Rgb::ZERO; faces.unwrap_or(0)];
+    for (patch, &e) in mesh.patches.iter().zip(emission) {
+        face_emission[patch.face as usize] = e;
+    }
+    face_emission
 }
 
 /// The mean over a patch (corners `ids`) of a function known at its corners and its
