@@ -26,6 +26,21 @@ use std::collections::BTreeSet;
 /// light, makes corners and centroid disagree (1.39% -> 1.48%).
 const MISFIT_TOLERANCE: f64 = 0.3;
 
+/// How much finer than refinement's finest element ([`finest_radius`]) a display split may
+/// make a leaf: one level more. Refinement stops there because finer elements need links the
+/// budget cannot afford everywhere; a display split adds leaves and no links, and the leaf
+/// budget bounds it. Measured (docs/BENCHMARKS.md): at refinement's finest, the monastery
+/// could split 10,046 of its 62,104 leaves whose light curves (7.71% smooth RMS); one level
+/// finer, 47,694 (6.96%), and the monastery piece at knob 0.9 read 2.84 -> 2.46%.
+const DISPLAY_FINEST_SHARE: f64 = 0.5;
+
+/// The share of the leaf budget left after refinement that display splits may take. Their
+/// pieces that straddle the edge of where light reaches split on ([`Hierarchy::split_for_display`])
+/// in generations that each must fit the budget whole: given all of it, the monastery's display
+/// splits used it up, its ground's pieces at the foot of the walls stayed whole, and the ground
+/// read 2.80% smooth RMS instead of 2.06% with half.
+const DISPLAY_ROOM_SHARE: f64 = 0.5;
+
 /// What viewers are shown: the leaves, their solution and their corners' light.
 pub(super) struct Displayed {
     /// The leaves as a mesh.
@@ -39,7 +54,9 @@ pub(super) struct Displayed {
 /// Splits the leaves of `hierarchy` (built from `scene`, solved as `radiosity`) whose
 /// centroid's reflected direct light lies further than [`MISFIT_TOLERANCE`] times the mean
 /// reflected radiosity from its corners' mean, worst first (by that misfit squared times the
-/// leaf's area: its share of what viewers see wrong), within `settings.max_leaves`, once; then
+/// leaf's area: its share of what viewers see wrong), once, down to one level below
+/// refinement's finest element ([`DISPLAY_FINEST_SHARE`]) and within a share of what
+/// `settings.max_leaves` leaves ([`DISPLAY_ROOM_SHARE`]); then
 /// gathers the corners' light of the leaves as they are (the gather made to decide is kept
 /// when nothing split).
 pub(super) fn split_where_direct_light_curves(
@@ -51,17 +68,19 @@ pub(super) fn split_where_direct_light_curves(
     lights: &BTreeSet<u32>,
 ) -> Displayed {
     let finest = finest_radius(scene, settings.max_leaves);
+    let display_finest = finest * DISPLAY_FINEST_SHARE;
     let mesh = hierarchy.leaf_mesh();
     let averaged = CornerIndirect::Averaged;
     let light = CornerLight::new(scene, &mesh, occluders, lights, averaged);
     let misfit = light.direct_misfit(&mesh, &hierarchy.leaf_emission());
     let tolerance = MISFIT_TOLERANCE * hierarchy.mean_reflected(&radiosity);
     let mut worst: Vec<(f64, usize)> = (0..mesh.patches.len())
-        .filter(|&i| misfit[i] > tolerance && hierarchy.can_split_leaf(i, finest))
+        .filter(|&i| misfit[i] > tolerance && hierarchy.can_split_leaf(i, display_finest))
         .map(|i| (misfit[i] * misfit[i] * mesh.patches[i].area, i))
         .collect();
     // Each split leaf becomes four.
-    let room = settings.max_leaves.saturating_sub(mesh.patches.len()) / 3;
+    let left = settings.max_leaves.saturating_sub(mesh.patches.len());
+    let room = (left as f64 * DISPLAY_ROOM_SHARE) as usize / 3;
     worst.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
     worst.truncate(room);
     if worst.is_empty() {
