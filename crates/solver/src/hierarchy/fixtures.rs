@@ -1,7 +1,9 @@
 //! Scenes and a build helper for the hierarchy's unit tests.
 
 use super::{Hierarchy, HierarchySettings};
+use crate::geometry::{Polygon, point_to_polygon_form_factor};
 use crate::pair::FormFactorSettings;
+use crate::reference::Probe;
 use crate::scene::{Material, Rgb, Scene};
 use crate::solve::SolverSettings;
 use crate::visibility::Occluders;
@@ -147,4 +149,26 @@ pub(crate) fn unit_box(corner: DVec3) -> [(DVec3, DVec3, DVec3); 5] {
         (o, y, x),
         (o + z, x, y),
     ]
+}
+
+/// Probes of face 0 (a floor of reflectance 0.5 facing `normal`) at `points`, each with its
+/// exact radiosity where nothing but `lamp` (emitting 1, facing the floor) lights it: half
+/// Lambert's point-to-polygon factor to the lamp.
+pub(crate) fn probes_under_a_lamp(
+    points: impl Iterator<Item = DVec3>,
+    normal: DVec3,
+    lamp: &Polygon,
+) -> Vec<Probe> {
+    points
+        .map(|x| {
+            let exact = 0.5 * point_to_polygon_form_factor(x, normal, lamp, -normal);
+            Probe {
+                position: x.to_array(),
+                face: 0,
+                object: "floor".into(),
+                radiosity: [exact; 3],
+                standard_error: [0.0; 3],
+            }
+        })
+        .collect()
 }

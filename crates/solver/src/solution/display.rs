@@ -108,12 +108,10 @@ pub(super) fn split_where_direct_light_curves(
 mod tests {
     use super::{Displayed, split_where_direct_light_curves};
     use crate::accuracy::evaluate;
-    use crate::geometry::point_to_polygon_form_factor;
-    use crate::hierarchy::fixtures::{GREY, add_parallelogram};
+    use crate::hierarchy::fixtures::{GREY, add_parallelogram, probes_under_a_lamp};
     use crate::hierarchy::{Hierarchy, HierarchySettings};
     use crate::mesh::Mesh;
     use crate::pair::FormFactorSettings;
-    use crate::reference::Probe;
     use crate::scene::{Material, Rgb, Scene};
     use crate::solution::vertices::{CornerIndirect, CornerLight};
     use crate::solve::SolverSettings;
@@ -203,21 +201,9 @@ mod tests {
     ) -> (usize, f64, f64) {
         let emission = hierarchy.leaf_emission();
         let corners = light.linear_corner_radiosity(mesh, hierarchy, radiosity, &emission);
-        let lamp = &scene.faces[1].polygon;
-        let probes: Vec<Probe> = (0..32 * 32)
-            .map(|k| {
-                let at = |i: usize| -4.0 + 8.0 * (i as f64 + 0.5) / 32.0;
-                let x = dvec3(at(k % 32), at(k / 32), 0.0);
-                let exact = 0.5 * point_to_polygon_form_factor(x, DVec3::Z, lamp, -DVec3::Z);
-                Probe {
-                    position: x.to_array(),
-                    face: 0,
-                    object: "floor".into(),
-                    radiosity: [exact; 3],
-                    standard_error: [0.0; 3],
-                }
-            })
-            .collect();
+        let at = |i: usize| -4.0 + 8.0 * (i as f64 + 0.5) / 32.0;
+        let grid = (0..32 * 32).map(|k| dvec3(at(k % 32), at(k / 32), 0.0));
+        let probes = probes_under_a_lamp(grid, DVec3::Z, &scene.faces[1].polygon);
         let error = evaluate(scene, mesh, radiosity, &corners, &probes);
         (mesh.patches.len(), error.smooth.rms, error.smooth.energy)
     }

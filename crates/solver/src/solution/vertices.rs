@@ -59,6 +59,11 @@ struct RayBudget {
 /// rays.
 const GATHERED_BOUNCES: usize = 2;
 
+/// The least weight a patch's unreached corners may have in its interpolated mean for the
+/// patch to say what they show ([`extrapolate_unreached`]): a quad's
+/// side corner weighs 1/6, a triangle's 1/3.
+const MIN_EXTRAPOLATED_WEIGHT: f64 = 0.1;
+
 /// Emitting faces beyond which corners gather none (their patches' values are averaged, as
 /// without a gather): corners times emitters times rays would outgrow the solve itself.
 pub const MAX_GATHERED_EMITTERS: usize = 256;
@@ -255,8 +260,12 @@ impl CornerLight {
             transport.gather(emission, &mut direct_gathered);
         }
         let face_emission = face_emission(mesh, emission);
-        let direct = self.corners.read(&face_emission);
+        // Corners that light reaches from none of their patches take each field's value from
+        // their patches' centroids (`extrapolate_unreached`).
+        let unreached = self.unreached_corners(mesh);
+        let mut direct = self.corners.read(&face_emission);
         let centre_direct = self.centres.read(&face_emission);
+        extrapolate_unreached(mesh, &unreached, &mut direct, &centre_direct);
         // Per corner, its face's emission and reflectance; `None` for a corner no patch uses.
         let mut surface = vec![None; mesh.positions.len()];
         for (i, patch) in mesh.patches.iter().enumerate() {
@@ -264,10 +273,12 @@ impl CornerLight {
                 surface[c as usize] = Some((emission[i], patch.reflectance));
             }
         }
-        // Per corner, the mean over the patches around it of their indirect light.
-        let averaged_indirect = self.reached_mean(mesh, |i, patch| {
-            radiosity[i] - emission[i] - patch.reflectance * direct_gathered[i]
-        });
+        // Per patch, its indirect light; per corner, the mean over the patches around it.
+        let patch_indirect: Vec<Rgb> = (mesh.patches.iter().enumerate())
+            .map(|(i, patch)| radiosity[i] - emission[i] - patch.reflectance * direct_gathered[i])
+            .collect();
+        let mut averaged_indirect = self.reached_mean(mesh, |i, _| patch_indirect[i]);
+        extrapolate_unreached(mesh, &unreached, &mut averaged_indirect, &patch_indirect);
         // Where the direct light curves over a patch, its corners' values interpolated miss
         // part of it (most at a wall's top edge, where it rises from zero): that part goes
         // into the corners, so the smooth reading keeps the patch's energy.
@@ -299,7 +310,8 @@ impl CornerLight {
                 let reflected: Vec<Rgb> = (values.iter().zip(&surface))
                     .map(|(value, surface)| surface.map_or(Rgb::ZERO, |(e, _)| *value - e))
                     .collect();
-                let (gathered, centre_gathered) = bounce.read(mesh, &reflected);
+                let (mut gathered, centre_gathered) = bounce.read(mesh, &reflected);
+                extrapolate_unreached(mesh, &unreached, &mut gathered, &centre_gathered);
                 let missed = self.missed_by_interpolation(mesh, &gathered, &centre_gathered);
                 values = values_with(&|c| {
                     surface[c].map_or(Rgb::ZERO, |(_, reflectance)| {
@@ -309,6 +321,18 @@ impl CornerLight {
             }
         }
         values
+    }
+
+    /// Per corner of `mesh`, whether light reaches it from none of the patches that use it
+    /// (inside a wall its face runs into: all its gathers read there is the wall's inside).
+    fn unreached_corners(&self, mesh: &Mesh) -> Vec<bool> {
+        let mut unreached = vec![true; mesh.positions.len()];
+        for (patch, slots) in mesh.patches.iter().zip(&self.reached) {
+            for (&c, &reached) in patch.corners[..patch.corner_count()].iter().zip(slots) {
+                unreached[c as usize] &= !reached;
+            }
+        }
+        unreached
     }
 
     /// Per patch of `mesh` under the patches' `emission`, how far the direct light its centroid
@@ -374,6 +398,53 @@ impl CornerLight {
     }
 }
 
+/// Replaces the value `at_corners` of each `unreached` corner by the one the visible
+/// parts of its patches call for: in each patch, the one value its unreached corners share
+/// that makes the patch's interpolated mean the value `at_centres` its centroid has,
+/// area-weighted over the patches around the corner. Read at such a corner, a light is
+/// dark, and viewers saw the dark smeared over the lit part of every patch around it (and
+/// what interpolation misses went to its other corners instead); extrapolated through the
+/// centroid, a patch whose light falls toward the wall keeps that fall and one lit up to
+/// it stays lit, and interpolation misses nothing of it. Linear in the values, as the rest.
+fn extrapolate_unreached(
+    mesh: &Mesh,
+    unreached: &[bool],
+    at_corners: &mut [Rgb],
+    at_centres: &[Rgb],
+) {
+    let mut sums = vec![(Rgb::ZERO, 0.0); mesh.positions.len()];
+    for (i, patch) in mesh.patches.iter().enumerate() {
+        let ids = &patch.corners[..patch.corner_count()];
+        if ids.iter().all(|&c| !unreached[c as usize]) {
+            continue;
+        }
+        let weights = interpolation_weights(mesh, ids);
+        let (mut known, mut unknown_weight) = (Rgb::ZERO, 0.0);
+        for (&c, &weight) in ids.iter().zip(&weights) {
+            if unreached[c as usize] {
+                unknown_weight += weight;
+            } else {
+                known += at_corners[c as usize] * weight;
+            }
+        }
+        // A corner that weighs little in the mean would take its error many times over.
+        if unknown_weight < MIN_EXTRAPOLATED_WEIGHT {
+            continue;
+        }
+        let shared = (at_centres[i] - known) / unknown_weight;
+        for &c in ids.iter().filter(|&&c| unreached[c as usize]) {
+            let sum = &mut sums[c as usize];
+            sum.0 += shared * patch.area;
+            sum.1 += patch.area;
+        }
+    }
+    for (value, (sum, area)) in at_corners.iter_mut().zip(sums) {
+        if area > 0.0 {
+            *value = sum / area;
+        }
+    }
+}
+
 /// Per input face of `mesh`, the `emission` of its patches (one per patch): what the direct
 /// light's weights read.
 fn face_emission(mesh: &Mesh, emission: &[Rgb]) -> Vec<Rgb> {
@@ -397,16 +468,29 @@ fn second_order_mean(ids: &[u32], at_corners: &[Rgb], centre: Rgb) -> Rgb {
 /// The mean over a patch (corners `ids`) of `values` interpolated linearly over its fan
 /// triangles, as viewers show them.
 fn interpolated_mean(mesh: &Mesh, ids: &[u32], values: &[Rgb]) -> Rgb {
+    (ids.iter().zip(interpolation_weights(mesh, ids)))
+        .map(|(&c, weight)| values[c as usize] * weight)
+        .sum()
+}
+
+/// Per corner of a patch (corners `ids`), its weight in the mean of values interpolated
+/// linearly over the patch's fan triangles: a third of the area share of each fan triangle
+/// it is a corner of (all zero for a patch of no area).
+fn interpolation_weights(mesh: &Mesh, ids: &[u32]) -> [f64; 4] {
     let at = |k: usize| mesh.positions[ids[k] as usize];
-    let (mut sum, mut area) = (Rgb::ZERO, 0.0);
+    let mut weights = [0.0; 4];
+    let mut total = 0.0;
     for k in 1..ids.len() - 1 {
-        let weight = triangle_area(at(0), at(k), at(k + 1));
-        let mean =
-            (values[ids[0] as usize] + values[ids[k] as usize] + values[ids[k + 1] as usize]) / 3.0;
-        sum += mean * weight;
-        area += weight;
+        let area = triangle_area(at(0), at(k), at(k + 1));
+        for corner in [0, k, k + 1] {
+            weights[corner] += area / 3.0;
+        }
+        total += area;
     }
-    if area > 0.0 { sum / area } else { Rgb::ZERO }
+    if total > 0.0 {
+        weights.iter_mut().for_each(|w| *w /= total);
+    }
+    weights
 }
 
 /// The emitters `point` sees, each with its form factor times the share visibility lets
@@ -505,8 +589,10 @@ pub fn clamp_below_zero(mut values: Vec<Rgb>) -> Vec<Rgb> {
 #[cfg(test)]
 mod tests {
     use super::{CornerLight, interpolated_mean, second_order_mean};
+    use crate::accuracy::evaluate;
     use crate::hierarchy::fixtures::{
-        GREY, add_parallelogram, closed_cube, floor_cut_by_a_box, room_with_a_box,
+        GREY, add_parallelogram, closed_cube, floor_cut_by_a_box, probes_under_a_lamp,
+        room_with_a_box,
     };
     use crate::mesh::Mesh;
     use crate::scene::{Material, Rgb, Scene};
@@ -713,6 +799,38 @@ mod tests {
                 corners(patch)
             );
         }
+    }
+
+    #[test]
+    fn a_patch_running_into_a_box_shows_its_lit_part_from_corners_inside_the_box() {
+        // One patch of floor, its far side inside a box whose wall crosses it at x = 0.8: the
+        // far corners gather only the box's inside. Read there, they are dark and viewers see
+        // the lit 80% of the patch fade to half its light at the wall; extrapolated through
+        // the centroid, it shows the lamp's light, against Lambert's exact factor at 1,024
+        // points of the lit part (the lamp, 10 m up, is seen whole up to the 10 cm wall).
+        let scene = floor_cut_by_a_box(0.8);
+        let request = SolveRequest {
+            patches: PatchTarget::EdgeLength(2.0),
+            ..request(false)
+        };
+        let solved = solve_scene(scene.clone(), &request, &crate::no_progress).expect("solves");
+        let floor: Vec<_> = solved.mesh.patches.iter().filter(|p| p.face == 0).collect();
+        assert_eq!(floor.len(), 1, "the floor is one patch");
+        // A 32 x 32 grid over the lit part, x in [0, 0.8], z in [0, 1].
+        let at = |i: usize, side: f64| side * (i as f64 + 0.5) / 32.0;
+        let grid = (0..32 * 32).map(|k| dvec3(at(k % 32, 0.8), 0.0, at(k / 32, 1.0)));
+        let probes = probes_under_a_lamp(grid, DVec3::Y, &scene.faces[1].polygon);
+        let radiosity = &solved.radiosity;
+        let error = evaluate(
+            &scene,
+            &solved.mesh,
+            radiosity,
+            &solved.vertex_radiosity,
+            &probes,
+        );
+        println!("{:?}", error.smooth);
+        assert!(error.smooth.rms < 0.02, "{:?}", error.smooth);
+        assert!(error.smooth.energy.abs() < 0.01, "{:?}", error.smooth);
     }
 
     #[test]
