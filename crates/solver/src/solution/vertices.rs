@@ -60,8 +60,8 @@ struct RayBudget {
 const GATHERED_BOUNCES: usize = 2;
 
 /// The least weight a patch's unreached corners may have in its interpolated mean for the
-/// patch to say what they show ([`extrapolate_unreached`]): a quad's
-/// side corner weighs 1/6, a triangle's 1/3.
+/// patch to say what they show ([`extrapolate_unreached`]): a quad's side corner weighs 1/6,
+/// a triangle's 1/3.
 const MIN_EXTRAPOLATED_WEIGHT: f64 = 0.1;
 
 /// Emitting faces beyond which corners gather none (their patches' values are averaged, as
