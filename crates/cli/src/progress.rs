@@ -21,6 +21,7 @@ pub(crate) struct ProgressPrinter {
 enum Stage {
     FormFactors,
     Probes,
+    Gathering,
     Solve,
     Refine,
 }
@@ -30,6 +31,7 @@ impl Stage {
         match progress {
             Progress::FormFactors { .. } => Some(Stage::FormFactors),
             Progress::Probes { .. } => Some(Stage::Probes),
+            Progress::Gathering { .. } => Some(Stage::Gathering),
             Progress::Solve { .. } => Some(Stage::Solve),
             Progress::Refining { .. } => Some(Stage::Refine),
             _ => None,
@@ -40,6 +42,7 @@ impl Stage {
         match self {
             Stage::FormFactors => "form factors",
             Stage::Probes => "probes",
+            Stage::Gathering => "vertex light",
             Stage::Solve => "solve",
             Stage::Refine => "refine",
         }
@@ -49,6 +52,9 @@ impl Stage {
         let template = match self {
             Stage::FormFactors | Stage::Probes => {
                 "{prefix:>12} {elapsed_precise} {wide_bar} {percent:>3}% {per_sec} ({eta} left)"
+            }
+            Stage::Gathering => {
+                "{prefix:>12} {elapsed_precise} {wide_bar} {percent:>3}% {msg} ({eta} left)"
             }
             Stage::Solve | Stage::Refine => "{prefix:>12} {elapsed_precise} {spinner} {msg}",
         };
@@ -103,6 +109,11 @@ impl ProgressPrinter {
 fn draw(bar: &ProgressBar, progress: &Progress) {
     match *progress {
         Progress::FormFactors { done, total } | Progress::Probes { done, total } => {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        }
+        Progress::Gathering { pass, done, total } => {
+            bar.set_message(pass.to_string());
             bar.set_length(total as u64);
             bar.set_position(done as u64);
         }

@@ -80,6 +80,16 @@ pub enum Progress<'a> {
         /// Relative residual (an estimate inside a GMRES cycle).
         residual: f64,
     },
+    /// Light gathered at the corners and centroids viewers' values come from, after the
+    /// patches are solved or refined: points done out of total for one pass of rays.
+    Gathering {
+        /// What this pass's rays gather.
+        pass: &'a str,
+        /// Points finished.
+        done: usize,
+        /// Points in all.
+        total: usize,
+    },
     /// Hierarchical refinement: one generation of link decisions done.
     Refining {
         /// The error knob this attempt refines to.
@@ -147,6 +157,9 @@ impl Progress<'_> {
                 format!("form factors {:5.1}%", percent(done, total))
             }
             Progress::Probes { done, total } => format!("reference: {done} of {total} probes"),
+            Progress::Gathering { pass, done, total } => {
+                format!("vertex light: {pass} at {done} of {total} points")
+            }
             Progress::Solve {
                 iteration,
                 residual,

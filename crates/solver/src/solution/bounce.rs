@@ -12,7 +12,7 @@
 //! (direct light gathered at corners, interpolated), so the gather is linear in them: where
 //! each ray landed is kept (8 bytes a ray), once per mesh, and serves every emission edit.
 
-use super::gather_point::{GatherPoint, PointRows};
+use super::gather_point::{GatherPoint, PointRows, Tally};
 use super::locator::{PatchLocator, fan_corners};
 use crate::mesh::Mesh;
 use crate::sampling::{cosine_direction, pair_seed, stratified_uv};
@@ -83,18 +83,22 @@ pub(super) struct BounceLandings {
 
 impl BounceLandings {
     /// Casts the bounce's rays from `corners` (one per corner of `mesh`; `None`: a corner no
-    /// patch uses) and from `centroids` (one per patch), and records where they land.
+    /// patch uses) and from `centroids` (one per patch), and records where they land, counting
+    /// the points done in `tally`.
     pub(super) fn cast(
         mesh: &Mesh,
-        corners: &[Option<GatherPoint>],
-        centroids: &[Option<GatherPoint>],
+        (corners, centroids): (&[Option<GatherPoint>], &[Option<GatherPoint>]),
         occluders: &Occluders,
         face_count: usize,
+        tally: &Tally,
     ) -> BounceLandings {
         let locator = PatchLocator::new(mesh, face_count);
+        let cast = |points, first_index| {
+            Landings::cast(mesh, &locator, points, first_index, occluders, tally)
+        };
         BounceLandings {
-            corners: Landings::cast(mesh, &locator, corners, 0, occluders),
-            centres: Landings::cast(mesh, &locator, centroids, corners.len(), occluders),
+            corners: cast(corners, 0),
+            centres: cast(centroids, corners.len()),
         }
     }
 
@@ -112,15 +116,16 @@ impl Landings {
     /// Casts [`BOUNCE_RAYS`] from each of `points` (the first seeded as point
     /// `first_index`) and records where they land. A ray that escapes, meets the back of a
     /// face (from inside a wall it reads nothing), or a face that reflects nothing (a sky, at
-    /// any edit), gathers nothing.
+    /// any edit), gathers nothing. Each point counts as done in `tally`.
     fn cast(
         mesh: &Mesh,
         locator: &PatchLocator,
         points: &[Option<GatherPoint>],
         first_index: usize,
         occluders: &Occluders,
+        tally: &Tally,
     ) -> Landings {
-        Landings(PointRows::at_points(points, |index, point| {
+        Landings(PointRows::at_points(points, tally, |index, point| {
             let seed = pair_seed(first_index + index, BOUNCE_SEED);
             let normal = snapped(point.normal);
             let mut landed = Vec::new();

@@ -12,6 +12,7 @@
 //! there ([`CornerLight::direct_misfit`]).
 
 use super::vertices::{CornerIndirect, CornerLight};
+use crate::Progress;
 use crate::hierarchy::{Hierarchy, HierarchySettings, finest_radius};
 use crate::mesh::Mesh;
 use crate::scene::{Rgb, Scene};
@@ -58,7 +59,7 @@ pub(super) struct Displayed {
 /// refinement's finest element ([`DISPLAY_FINEST_SHARE`]) and within a share of what
 /// `settings.max_leaves` leaves ([`DISPLAY_ROOM_SHARE`]); then
 /// gathers the corners' light of the leaves as they are (the gather made to decide is kept
-/// when nothing split).
+/// when nothing split), each pass of rays reporting its `progress`.
 pub(super) fn split_where_direct_light_curves(
     hierarchy: &mut Hierarchy,
     radiosity: Vec<Rgb>,
@@ -66,12 +67,13 @@ pub(super) fn split_where_direct_light_curves(
     occluders: &Occluders,
     settings: &HierarchySettings,
     lights: &BTreeSet<u32>,
+    progress: &(dyn Fn(Progress) + Sync),
 ) -> Displayed {
     let finest = finest_radius(scene, settings.max_leaves);
     let display_finest = finest * DISPLAY_FINEST_SHARE;
     let mesh = hierarchy.leaf_mesh();
     let averaged = CornerIndirect::Averaged;
-    let light = CornerLight::new(scene, &mesh, occluders, lights, averaged);
+    let light = CornerLight::new(scene, &mesh, occluders, lights, averaged, progress);
     let misfit = light.direct_misfit(&mesh, &hierarchy.leaf_emission());
     let tolerance = MISFIT_TOLERANCE * hierarchy.mean_reflected(&radiosity);
     let mut worst: Vec<(f64, usize)> = (0..mesh.patches.len())
@@ -85,7 +87,7 @@ pub(super) fn split_where_direct_light_curves(
     worst.truncate(room);
     if worst.is_empty() {
         return Displayed {
-            light: light.with_gathered_bounces(scene, &mesh, occluders),
+            light: light.with_gathered_bounces(scene, &mesh, occluders, progress),
             mesh,
             radiosity,
         };
@@ -98,7 +100,7 @@ pub(super) fn split_where_direct_light_curves(
     let mesh = hierarchy.leaf_mesh();
     let gathered = CornerIndirect::Gathered;
     Displayed {
-        light: CornerLight::new(scene, &mesh, occluders, lights, gathered),
+        light: CornerLight::new(scene, &mesh, occluders, lights, gathered, progress),
         mesh,
         radiosity,
     }
@@ -168,7 +170,7 @@ mod tests {
         let (links, lights) = (hierarchy.stats().links, BTreeSet::from([1]));
         let mesh = hierarchy.leaf_mesh();
         let gathered = CornerIndirect::Gathered;
-        let light = CornerLight::new(scene, &mesh, &occluders, &lights, gathered);
+        let light = CornerLight::new(scene, &mesh, &occluders, &lights, gathered, &no_progress);
         let unsplit = floor_error(scene, &hierarchy, &mesh, &radiosity, &light);
         let split = split_where_direct_light_curves(
             &mut hierarchy,
@@ -177,6 +179,7 @@ mod tests {
             &occluders,
             &settings,
             &lights,
+            &no_progress,
         );
         let Displayed {
             mesh,

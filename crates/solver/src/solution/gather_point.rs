@@ -1,10 +1,12 @@
 //! Where the display's values are gathered: a mesh corner or a patch's centroid, with the
 //! points around it that rays start from; and what each such point reads, as sparse weights.
 
+use crate::Progress;
 use crate::mesh::Mesh;
 use crate::scene::Rgb;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// How far a shadow ray's origin moves from a corner toward the centre of a patch that uses
 /// it, as a fraction of the distance. Visibility at a corner is so the mean over a small
@@ -68,6 +70,47 @@ impl GatherPoint {
     }
 }
 
+/// Gather points between two progress reports: a report a point would cost more than the
+/// point's rays on a small scene, and a million points report a thousand times.
+const POINTS_PER_REPORT: usize = 1024;
+
+/// One pass of rays over a mesh's gather points (its corners', then its centroids'), counting
+/// the points done and reporting them as [`Progress::Gathering`].
+pub(super) struct Tally<'a> {
+    pass: &'static str,
+    total: usize,
+    done: AtomicUsize,
+    progress: &'a (dyn Fn(Progress) + Sync),
+}
+
+impl<'a> Tally<'a> {
+    /// A pass named `pass` over the corners and centroids of `mesh`.
+    pub(super) fn over(
+        mesh: &Mesh,
+        pass: &'static str,
+        progress: &'a (dyn Fn(Progress) + Sync),
+    ) -> Tally<'a> {
+        Tally {
+            pass,
+            total: mesh.positions.len() + mesh.patches.len(),
+            done: AtomicUsize::new(0),
+            progress,
+        }
+    }
+
+    /// Counts one point done, and reports every [`POINTS_PER_REPORT`]th and the last.
+    fn point_done(&self) {
+        let done = self.done.fetch_add(1, Ordering::Relaxed) + 1;
+        if done % POINTS_PER_REPORT == 0 || done == self.total {
+            (self.progress)(Progress::Gathering {
+                pass: self.pass,
+                done,
+                total: self.total,
+            });
+        }
+    }
+}
+
 /// The point a fraction [`INSET`] of the way from `corner` to `inside`.
 pub(super) fn inset(corner: DVec3, inside: DVec3) -> DVec3 {
     corner + (inside - corner) * INSET
@@ -93,15 +136,20 @@ impl<T: Send> PointRows<T> {
     }
 
     /// Each of `points` with the list `list` (its index, the point) gives, in parallel; a
-    /// `None` point gets an empty one.
+    /// `None` point gets an empty one. Each point counts as done in `tally`.
     pub(super) fn at_points(
         points: &[Option<GatherPoint>],
+        tally: &Tally,
         list: impl Fn(usize, &GatherPoint) -> Vec<T> + Sync,
     ) -> PointRows<T> {
         let per_point: Vec<Vec<T>> = points
             .par_iter()
             .enumerate()
-            .map(|(index, point)| point.as_ref().map_or(Vec::new(), |p| list(index, p)))
+            .map(|(index, point)| {
+                let row = point.as_ref().map_or(Vec::new(), |p| list(index, p));
+                tally.point_done();
+                row
+            })
             .collect();
         let mut offsets = Vec::with_capacity(per_point.len() + 1);
         offsets.push(0);

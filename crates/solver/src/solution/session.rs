@@ -179,7 +179,7 @@ impl Session {
             DenseFormFactors::compute(mesh, &occluders, &request.form_factors, progress);
         let lights = lit_objects(scene);
         let averaged = CornerIndirect::Averaged;
-        let corner_light = CornerLight::new(scene, mesh, &occluders, &lights, averaged);
+        let corner_light = CornerLight::new(scene, mesh, &occluders, &lights, averaged, progress);
         seconds.form_factors = clock.elapsed().as_secs_f64();
         Ok(Session::assemble(
             scene.clone(),
@@ -232,6 +232,7 @@ impl Session {
             &occluders,
             request,
             seconds,
+            progress,
         ))
     }
 
@@ -289,14 +290,15 @@ impl Session {
             }),
             ..request
         };
-        let session =
-            Session::on_hierarchy(scene, hierarchy, radiosity, &occluders, &request, seconds);
+        let session = Session::on_hierarchy(
+            scene, hierarchy, radiosity, &occluders, &request, seconds, progress,
+        );
         Ok((session, true))
     }
 
     /// A session on `hierarchy`, built from `scene` and solved as `radiosity` (per leaf), its
     /// leaves split where viewers would miss the direct light's shape across them
-    /// ([`display`](super::display)) and its corners' light gathered; the time it takes counts
+    /// ([`display`](super::display)) and its corners' light gathered (reporting `progress`); the time it takes counts
     /// as form factors.
     fn on_hierarchy(
         scene: Scene,
@@ -305,6 +307,7 @@ impl Session {
         occluders: &Occluders,
         request: &SolveRequest,
         mut seconds: StageSeconds,
+        progress: &(dyn Fn(Progress) + Sync),
     ) -> Session {
         let clock = Instant::now();
         let Displayed {
@@ -318,6 +321,7 @@ impl Session {
             occluders,
             &request.hierarchy.unwrap_or_default(),
             &lit_objects(&scene),
+            progress,
         );
         seconds.form_factors += clock.elapsed().as_secs_f64();
         let factors = Factors::Hierarchy(Box::new(hierarchy));
@@ -470,8 +474,15 @@ impl Session {
                     crate::geometry::bounds(swept),
                 );
                 let averaged = CornerIndirect::Averaged;
-                self.corner_light =
-                    CornerLight::new(&self.scene, &self.mesh, &occluders, &self.lights, averaged);
+                let lights = &self.lights;
+                self.corner_light = CornerLight::new(
+                    &self.scene,
+                    &self.mesh,
+                    &occluders,
+                    lights,
+                    averaged,
+                    &no_progress,
+                );
                 Ok(MoveReport {
                     work: MoveWork::Dense(stats),
                     seconds: clock.elapsed().as_secs_f64(),
@@ -595,7 +606,7 @@ impl Session {
         let lit = self.edited_scene();
         let occluders = Occluders::new(&lit);
         self.corner_light
-            .gather_lights(&lit, &self.mesh, &occluders, &self.lights);
+            .gather_lights(&lit, &self.mesh, &occluders, &self.lights, &no_progress);
         // The vertex values summed so far, gathered again alike (each light's share of the
         // rays may have changed with the new one).
         if self.base_vertices.is_some() {

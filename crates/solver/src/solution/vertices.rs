@@ -18,7 +18,8 @@
 //! light's does. Everything is linear in each emitter's emission, so edits still superpose.
 
 use super::bounce::BounceLandings;
-use super::gather_point::{GatherPoint, PointWeights, inset};
+use super::gather_point::{GatherPoint, PointWeights, Tally, inset};
+use crate::Progress;
 use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
 use crate::mesh::{Mesh, Patch};
 use crate::sampling::{pair_seed, stratified_uv};
@@ -118,13 +119,14 @@ impl CornerLight {
     /// Gathers the emitters of `scene` at the corners of `mesh` (built from it): the faces
     /// that emit, and every face of the objects in `lights` (a light turned off keeps its
     /// place, so that turning it on again finds its direct light gathered), with their
-    /// `indirect` light.
+    /// `indirect` light; each pass of rays reports its `progress`.
     pub fn new(
         scene: &Scene,
         mesh: &Mesh,
         occluders: &Occluders,
         lights: &BTreeSet<u32>,
         indirect: CornerIndirect,
+        progress: &(dyn Fn(Progress) + Sync),
     ) -> CornerLight {
         let reached = mesh
             .patches
@@ -148,7 +150,7 @@ impl CornerLight {
             bounce: None,
             reached,
         };
-        light.gather_lights(scene, mesh, occluders, lights);
+        light.gather_lights(scene, mesh, occluders, lights, progress);
         light
     }
 
@@ -161,6 +163,7 @@ impl CornerLight {
         mesh: &Mesh,
         occluders: &Occluders,
         lights: &BTreeSet<u32>,
+        progress: &(dyn Fn(Progress) + Sync),
     ) {
         let emitters: Vec<Emitter> = scene
             .faces
@@ -184,14 +187,16 @@ impl CornerLight {
         let corner_points = GatherPoint::corners_of(mesh);
         let centroids = GatherPoint::centroids_of(mesh);
         if self.indirect == CornerIndirect::Gathered && self.bounce.is_none() {
-            self.cast_bounce(scene, mesh, occluders, (&corner_points, &centroids));
+            let points = (&corner_points[..], &centroids[..]);
+            self.cast_bounce(scene, mesh, occluders, points, progress);
         }
         // Per point, the emitting faces it sees and its form factor to each, visibility
         // included; the centroids' rays are seeded apart from the corners'.
-        self.corners = PointWeights::at_points(&corner_points, |index, point| {
+        let tally = Tally::over(mesh, "direct light", progress);
+        self.corners = PointWeights::at_points(&corner_points, &tally, |index, point| {
             seen_factors(point, &emitters, occluders, index)
         });
-        self.centres = PointWeights::at_points(&centroids, |index, point| {
+        self.centres = PointWeights::at_points(&centroids, &tally, |index, point| {
             seen_factors(point, &emitters, occluders, mesh.positions.len() + index)
         });
     }
@@ -204,6 +209,7 @@ impl CornerLight {
         scene: &Scene,
         mesh: &Mesh,
         occluders: &Occluders,
+        progress: &(dyn Fn(Progress) + Sync),
     ) -> CornerLight {
         self.indirect = CornerIndirect::Gathered;
         if self.gathered && self.bounce.is_none() {
@@ -211,23 +217,23 @@ impl CornerLight {
                 GatherPoint::corners_of(mesh),
                 GatherPoint::centroids_of(mesh),
             );
-            self.cast_bounce(scene, mesh, occluders, (&corners, &centroids));
+            self.cast_bounce(scene, mesh, occluders, (&corners, &centroids), progress);
         }
         self
     }
 
-    /// Casts the bounce's rays from `corners` and `centroids` of `mesh`.
+    /// Casts the bounce's rays from `points`, the corners and centroids of `mesh`.
     fn cast_bounce(
         &mut self,
         scene: &Scene,
         mesh: &Mesh,
         occluders: &Occluders,
-        (corners, centroids): (&[Option<GatherPoint>], &[Option<GatherPoint>]),
+        points: (&[Option<GatherPoint>], &[Option<GatherPoint>]),
+        progress: &(dyn Fn(Progress) + Sync),
     ) {
+        let tally = Tally::over(mesh, "bounce rays", progress);
         let faces = scene.faces.len();
-        self.bounce = Some(BounceLandings::cast(
-            mesh, corners, centroids, occluders, faces,
-        ));
+        self.bounce = Some(BounceLandings::cast(mesh, points, occluders, faces, &tally));
     }
 
     /// Radiosity at every corner of `mesh`, W/m^2, for the patch solution `radiosity` under
@@ -598,11 +604,13 @@ mod tests {
     use crate::scene::{Material, Rgb, Scene};
     use crate::visibility::Occluders;
     use crate::{
-        HierarchySettings, Method, PatchTarget, SolveRequest, SolverSettings, solve_scene,
+        HierarchySettings, Method, PatchTarget, Progress, SolveRequest, SolverSettings,
+        no_progress, solve_scene,
     };
     use glam::{DVec3, dvec3};
     use std::collections::BTreeSet;
     use std::f64::consts::PI;
+    use std::sync::Mutex;
 
     fn request(hierarchical: bool) -> SolveRequest {
         SolveRequest {
@@ -676,6 +684,7 @@ mod tests {
                 &Occluders::new(&scene),
                 &std::collections::BTreeSet::new(),
                 super::CornerIndirect::Averaged,
+                &no_progress,
             );
             let face_emission = [Rgb::ZERO, Rgb::splat(10.0)];
             let got = light.corners.read(&face_emission)[corner];
@@ -691,6 +700,13 @@ mod tests {
     /// above (face 1), its corners' light gathered with the bounce; and, per corner, 1
     /// reflected by the plate's and nothing by the floor's.
     fn floor_under_a_reflecting_plate() -> (Mesh, CornerLight, Vec<Rgb>) {
+        floor_under_a_reflecting_plate_reporting(&no_progress)
+    }
+
+    /// [`floor_under_a_reflecting_plate`], its gather reporting `progress`.
+    fn floor_under_a_reflecting_plate_reporting(
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> (Mesh, CornerLight, Vec<Rgb>) {
         let mut scene = Scene::default();
         let (x, z) = (DVec3::X, DVec3::Z);
         add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z * 2.0, x * 2.0), GREY);
@@ -698,7 +714,8 @@ mod tests {
         let mesh = Mesh::build(&scene, PatchTarget::EdgeLength(0.5));
         let occluders = Occluders::new(&scene);
         let gathered = super::CornerIndirect::Gathered;
-        let light = CornerLight::new(&scene, &mesh, &occluders, &BTreeSet::new(), gathered);
+        let lights = BTreeSet::new();
+        let light = CornerLight::new(&scene, &mesh, &occluders, &lights, gathered, progress);
         let mut reflected = vec![Rgb::ZERO; mesh.positions.len()];
         for patch in mesh.patches.iter().filter(|p| p.face == 1) {
             for &c in &patch.corners[..patch.corner_count()] {
@@ -706,6 +723,29 @@ mod tests {
             }
         }
         (mesh, light, reflected)
+    }
+
+    #[test]
+    fn each_pass_of_rays_of_a_gather_reports_its_points_up_to_all_of_them() {
+        let reports = Mutex::new(Vec::new());
+        let progress = |p: Progress| {
+            if let Progress::Gathering { pass, done, total } = p {
+                reports
+                    .lock()
+                    .expect("no panic")
+                    .push((pass.to_string(), done, total));
+            }
+        };
+        let (mesh, _, _) = floor_under_a_reflecting_plate_reporting(&progress);
+        let reports = reports.into_inner().expect("no panic");
+        let points = mesh.positions.len() + mesh.patches.len();
+        let passes: Vec<&str> = reports.iter().map(|(pass, _, _)| pass.as_str()).collect();
+        assert_eq!(passes, ["bounce rays", "direct light"], "{reports:?}");
+        assert!(
+            reports
+                .iter()
+                .all(|&(_, done, total)| (done, total) == (points, points))
+        );
     }
 
     #[test]
