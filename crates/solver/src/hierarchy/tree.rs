@@ -347,8 +347,16 @@ impl Tree {
             .min(end - 1);
         let face = self.order[position];
         let polygon = &self.faces[face as usize];
+        // Where the pick fell within the face's share, uniform again: the pick itself, nearly
+        // the same for every point of a small face, put them all in one triangle of a quad.
+        let (low, high) = (self.area_prefix[position], self.area_prefix[position + 1]);
+        let within = if high > low {
+            ((target - low) / (high - low)).clamp(0.0, 1.0)
+        } else {
+            pick
+        };
         SurfacePoint {
-            position: polygon.uniform_point(u, v, pick),
+            position: polygon.uniform_point(u, v, within),
             normal: self.face_normals[face as usize],
             face,
         }
@@ -466,7 +474,54 @@ pub(super) fn element_node(mut e: Element, parent: u32, faces: Range<u32>) -> No
 
 #[cfg(test)]
 mod tests {
-    use crate::hierarchy::fixtures::{build, closed_cube};
+    use super::Tree;
+    use crate::hierarchy::fixtures::{GREY, add_parallelogram, build, closed_cube};
+    use crate::sampling::splitmix64;
+    use crate::scene::Scene;
+    use glam::DVec3;
+
+    #[test]
+    fn a_clusters_points_spread_over_its_faces_by_area() {
+        // Two unit squares side by side, one quad face each; their cluster's points, four
+        // thousand streams of sixteen, have the squares' mean position and spread: x uniform
+        // over [0, 2) (mean 1, variance 1/3), z over [0, 1) (mean 1/2, variance 1/12).
+        let mut scene = Scene::default();
+        for x in [0.0, 1.0] {
+            let origin = DVec3::new(x, 0.0, 0.0);
+            add_parallelogram(&mut scene, "floor", (origin, DVec3::Z, DVec3::X), GREY);
+        }
+        let tree = Tree::over(&scene);
+        assert!(tree.nodes[0].element.is_none(), "the root is the cluster");
+        let points: Vec<DVec3> = (0..4096u64)
+            .flat_map(|seed| (0..16).map(move |k| (seed, k)))
+            .map(|(seed, k)| tree.sample(0, k, splitmix64(seed)).position)
+            .collect();
+        let n = points.len() as f64;
+        let mean = points.iter().sum::<DVec3>() / n;
+        let variance = points
+            .iter()
+            .map(|p| (*p - mean) * (*p - mean))
+            .sum::<DVec3>()
+            / n;
+        // Within about four standard errors.
+        assert!(
+            (mean.x - 1.0).abs() < 0.01 && (mean.z - 0.5).abs() < 0.005,
+            "{mean}"
+        );
+        let (vx, vz) = (variance.x - 1.0 / 3.0, variance.z - 1.0 / 12.0);
+        assert!(vx.abs() < 0.01 && vz.abs() < 0.003, "{variance}");
+        // Each quad's halves (either side of its diagonal from (x, 0) to (x + 1, 1)) alike.
+        for square in [0.0, 1.0] {
+            let on: Vec<&DVec3> = points.iter().filter(|p| p.x.floor() == square).collect();
+            let below = on.iter().filter(|p| p.z < p.x - square).count();
+            let share = below as f64 / on.len() as f64;
+            assert!(
+                (share - 0.5).abs() < 0.015,
+                "square {square}: {below} of {}",
+                on.len()
+            );
+        }
+    }
 
     #[test]
     fn leaves_tile_every_face_and_share_corners() {
