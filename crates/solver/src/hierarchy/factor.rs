@@ -9,8 +9,8 @@ use super::{Hierarchy, Pair};
 use crate::geometry::{Polygon, point_to_polygon_form_factor};
 use crate::mesh::Patch;
 use crate::pair::{
-    FormFactorSettings, facing_kernel, mutually_facing, near_pair_level, rays_for_pair,
-    unoccluded_form_factor, wholly_in_far_field,
+    FormFactorSettings, facing_kernel, far_point_to_patch_factor, mutually_facing, near_pair_level,
+    rays_for_pair, unoccluded_form_factor, wholly_in_far_field,
 };
 use crate::sampling::{pair_seed, splitmix64, stratified_uv, unit_interval};
 use crate::visibility::Occluders;
@@ -453,7 +453,9 @@ impl<'a> LinkFactors<'a> {
                 .hierarchy
                 .tree
                 .sample(source, k as u32, splitmix64(seed));
-            let onto = point_to_polygon_form_factor(y.position, y.normal, &r.polygon, r.normal);
+            let onto = far_point_to_patch_factor(y.position, y.normal, r).unwrap_or_else(|| {
+                point_to_polygon_form_factor(y.position, y.normal, &r.polygon, r.normal)
+            });
             (y, onto)
         });
         let unoccluded: f64 = points.iter().map(|(_, f)| f).sum();
