@@ -140,7 +140,7 @@ impl Landings {
                     continue;
                 }
                 let landing = origin + direction * hit.distance;
-                let Some(place) = locator.place(mesh, hit.face, landing) else {
+                let Some(place) = locator.place(hit.face, landing) else {
                     continue;
                 };
                 if mesh.patches[place.patch].reflectance.max_element() > 0.0 {

@@ -1,14 +1,18 @@
 //! Which patch of a mesh holds a point of a scene face, and where in it: what a ray that meets
 //! the face sees of a solution (its corners' values interpolated as viewers show them).
+//!
+//! The bounce's rays ask this tens of millions of times on a large model, so each face keeps
+//! its patches' fan triangles in its own plane, side by side in memory, each as the affine map
+//! from a point's in-plane coordinates to its weights: a candidate costs six multiplications
+//! and no read of the mesh.
 
-use crate::geometry::fan_weights;
 use crate::mesh::{Mesh, Patch};
 use glam::{DVec2, DVec3};
 use std::ops::Range;
 
-/// Faces with at most this many patches are searched patch by patch; larger ones through a
-/// grid in their plane.
-const SCANNED_PATCHES: usize = 8;
+/// Faces with at most this many fan triangles are searched triangle by triangle; larger ones
+/// through a grid in their plane.
+const SCANNED_TRIANGLES: usize = 16;
 
 /// A point's place in the mesh: its patch, the fan triangle `(c0, ck, ck+1)` of it that holds
 /// the point (`fan` is `k`), and the interpolation weights of that triangle's corners.
@@ -24,43 +28,65 @@ pub(super) fn fan_corners(patch: &Patch, fan: usize) -> [u32; 3] {
     [patch.corners[0], patch.corners[fan], patch.corners[fan + 1]]
 }
 
-/// A uniform grid over one face's patches in the face's plane: each cell lists the patches
+/// One fan triangle of a patch in its face's plane: the weights of `ck` and `ck+1` at in-plane
+/// point `p` are `to_weights * (p - c0)`.
+struct FanTriangle {
+    c0: DVec2,
+    /// Rows of the inverse of the matrix whose columns are `ck - c0` and `ck+1 - c0` (zero for
+    /// a triangle of no area: every point then has `c0`'s weight 1).
+    to_weights: [DVec2; 2],
+    patch: u32,
+    fan: u32,
+}
+
+impl FanTriangle {
+    fn new([a, b, c]: [DVec2; 3], patch: usize, fan: usize) -> FanTriangle {
+        let (e1, e2) = (b - a, c - a);
+        let det = e1.perp_dot(e2);
+        let to_weights = if det == 0.0 {
+            [DVec2::ZERO; 2]
+        } else {
+            [DVec2::new(e2.y, -e2.x) / det, DVec2::new(-e1.y, e1.x) / det]
+        };
+        FanTriangle {
+            c0: a,
+            to_weights,
+            patch: patch as u32,
+            fan: fan as u32,
+        }
+    }
+
+    /// The barycentric weights of in-plane point `p`.
+    fn weights(&self, p: DVec2) -> [f64; 3] {
+        let d = p - self.c0;
+        let (w1, w2) = (self.to_weights[0].dot(d), self.to_weights[1].dot(d));
+        [1.0 - w1 - w2, w1, w2]
+    }
+}
+
+/// A uniform grid over one face's fan triangles in its plane: each cell lists the triangles
 /// whose bounding box overlaps it.
 struct FaceGrid {
-    origin: DVec3,
-    axes: [DVec3; 2],
+    lo: DVec2,
     cell: f64,
     size: [usize; 2],
-    /// `cells[i]` for cell `i = x + size[0] * y`: indices into the mesh's patches.
-    cells: Vec<Vec<u32>>,
+    /// Cell `i = x + size[0] * y` lists `items[starts[i]..starts[i + 1]]`, indices into the
+    /// locator's triangles.
+    starts: Vec<u32>,
+    items: Vec<u32>,
 }
 
 impl FaceGrid {
-    /// About one cell per patch over the patches' bounding rectangle in the face's plane.
-    fn new(mesh: &Mesh, patches: Range<usize>) -> FaceGrid {
-        let normal = mesh.patches[patches.start].normal;
-        let (u, v) = normal.any_orthonormal_pair();
-        let origin = mesh.patches[patches.start].centroid;
-        let plane = |p: DVec3| DVec2::new((p - origin).dot(u), (p - origin).dot(v));
-        let corner_boxes: Vec<(DVec2, DVec2)> = patches
-            .clone()
-            .map(|i| {
-                let patch = &mesh.patches[i];
-                let points = patch.corners[..patch.corner_count()]
-                    .iter()
-                    .map(|&c| plane(mesh.positions[c as usize]));
-                points.fold((DVec2::INFINITY, DVec2::NEG_INFINITY), |(lo, hi), p| {
-                    (lo.min(p), hi.max(p))
-                })
-            })
-            .collect();
-        let (lo, hi) = corner_boxes
+    /// About one cell per triangle over the triangles' bounding rectangle: `boxes` are theirs,
+    /// the first being the locator's triangle `first`.
+    fn new(boxes: &[(DVec2, DVec2)], first: u32) -> FaceGrid {
+        let (lo, hi) = boxes
             .iter()
             .fold((DVec2::INFINITY, DVec2::NEG_INFINITY), |(lo, hi), b| {
                 (lo.min(b.0), hi.max(b.1))
             });
         let extent = (hi - lo).max(DVec2::splat(f64::MIN_POSITIVE));
-        let cell = (extent.x * extent.y / patches.len() as f64)
+        let cell = (extent.x * extent.y / boxes.len() as f64)
             .sqrt()
             .max(extent.max_element() / 1024.0);
         let size = [
@@ -68,46 +94,72 @@ impl FaceGrid {
             ((extent.y / cell).ceil() as usize).clamp(1, 1024),
         ];
         let mut grid = FaceGrid {
-            origin: origin + u * lo.x + v * lo.y,
-            axes: [u, v],
+            lo,
             cell,
             size,
-            cells: vec![Vec::new(); size[0] * size[1]],
+            starts: Vec::new(),
+            items: Vec::new(),
         };
-        for (i, (box_lo, box_hi)) in patches.zip(corner_boxes) {
-            let ([x0, y0], [x1, y1]) = (grid.cell_of(box_lo - lo), grid.cell_of(box_hi - lo));
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    grid.cells[x + size[0] * y].push(i as u32);
-                }
+        let cells_of = |b: &(DVec2, DVec2)| {
+            let ([x0, y0], [x1, y1]) = (grid.cell_of(b.0), grid.cell_of(b.1));
+            (y0..=y1).flat_map(move |y| (x0..=x1).map(move |x| x + size[0] * y))
+        };
+        // Counted, then filled: one allocation for the lists of every cell.
+        let mut counts = vec![0u32; size[0] * size[1] + 1];
+        for b in boxes {
+            cells_of(b).for_each(|i| counts[i + 1] += 1);
+        }
+        for i in 1..counts.len() {
+            counts[i] += counts[i - 1];
+        }
+        let mut next = counts.clone();
+        let mut items = vec![0; counts[counts.len() - 1] as usize];
+        for (t, b) in boxes.iter().enumerate() {
+            for i in cells_of(b) {
+                items[next[i] as usize] = first + t as u32;
+                next[i] += 1;
             }
         }
+        (grid.starts, grid.items) = (counts, items);
         grid
     }
 
-    /// The cell holding in-plane offset `p` from the grid's origin, clamped to the grid.
+    /// The cell holding in-plane point `p`, clamped to the grid.
     fn cell_of(&self, p: DVec2) -> [usize; 2] {
+        let d = p - self.lo;
         let index = |t: f64, n: usize| ((t / self.cell).floor().max(0.0) as usize).min(n - 1);
-        [index(p.x, self.size[0]), index(p.y, self.size[1])]
+        [index(d.x, self.size[0]), index(d.y, self.size[1])]
     }
 
-    /// The patches that may hold `x`.
-    fn candidates(&self, x: DVec3) -> &[u32] {
-        let d = x - self.origin;
-        let [cx, cy] = self.cell_of(DVec2::new(d.dot(self.axes[0]), d.dot(self.axes[1])));
-        &self.cells[cx + self.size[0] * cy]
+    /// The triangles that may hold in-plane point `p`.
+    fn candidates(&self, p: DVec2) -> &[u32] {
+        let [x, y] = self.cell_of(p);
+        let i = x + self.size[0] * y;
+        &self.items[self.starts[i] as usize..self.starts[i + 1] as usize]
     }
 }
 
-/// How each face's patches are searched.
-enum FaceIndex {
-    Scan(Range<usize>),
-    Grid(FaceGrid),
+/// One scene face's plane and how its triangles are searched.
+struct FaceIndex {
+    origin: DVec3,
+    axes: [DVec3; 2],
+    triangles: Range<u32>,
+    grid: Option<FaceGrid>,
+}
+
+impl FaceIndex {
+    /// `x`'s coordinates in the face's plane.
+    fn in_plane(&self, x: DVec3) -> DVec2 {
+        let d = x - self.origin;
+        DVec2::new(d.dot(self.axes[0]), d.dot(self.axes[1]))
+    }
 }
 
 /// Point location on a mesh built face by face.
 pub(super) struct PatchLocator {
-    faces: Vec<FaceIndex>,
+    /// Per scene face; `None` for a face with no patch.
+    faces: Vec<Option<FaceIndex>>,
+    triangles: Vec<FanTriangle>,
 }
 
 impl PatchLocator {
@@ -123,52 +175,73 @@ impl PatchLocator {
                 range.start..i + 1
             };
         }
+        let mut triangles = Vec::with_capacity(mesh.patches.len() * 2);
         let faces = ranges
             .into_iter()
-            .map(|range| match range.len() > SCANNED_PATCHES {
-                true => FaceIndex::Grid(FaceGrid::new(mesh, range)),
-                false => FaceIndex::Scan(range),
+            .map(|patches| {
+                let first = patches.clone().next()?;
+                let origin = mesh.patches[first].centroid;
+                let (u, v) = mesh.patches[first].normal.any_orthonormal_pair();
+                let start = triangles.len();
+                let mut index = FaceIndex {
+                    origin,
+                    axes: [u, v],
+                    triangles: 0..0,
+                    grid: None,
+                };
+                let mut boxes = Vec::new();
+                for i in patches {
+                    let patch = &mesh.patches[i];
+                    let ids = &patch.corners[..patch.corner_count()];
+                    let at = |k: usize| index.in_plane(mesh.positions[ids[k] as usize]);
+                    for fan in 1..ids.len() - 1 {
+                        let corners = [at(0), at(fan), at(fan + 1)];
+                        triangles.push(FanTriangle::new(corners, i, fan));
+                        let (lo, hi) = (corners[0].min(corners[1]), corners[0].max(corners[1]));
+                        boxes.push((lo.min(corners[2]), hi.max(corners[2])));
+                    }
+                }
+                index.triangles = start as u32..triangles.len() as u32;
+                if boxes.len() > SCANNED_TRIANGLES {
+                    index.grid = Some(FaceGrid::new(&boxes, start as u32));
+                }
+                Some(index)
             })
             .collect();
-        PatchLocator { faces }
+        PatchLocator { faces, triangles }
     }
 
-    /// Where `x`, a point of scene face `face`, lies in `mesh`: the fan triangle of the patch
-    /// that holds it best (the largest smallest barycentric weight). `None` for a face with no
-    /// patch.
-    pub(super) fn place(&self, mesh: &Mesh, face: u32, x: DVec3) -> Option<Place> {
-        let mut best: Option<(f64, Place)> = None;
-        let mut consider = |i: usize| {
-            let patch = &mesh.patches[i];
-            let ids = &patch.corners[..patch.corner_count()];
-            let mut positions = [DVec3::ZERO; 4];
-            for (p, &c) in positions.iter_mut().zip(ids) {
-                *p = mesh.positions[c as usize];
-            }
-            let (k, weights, inside) = fan_weights(&positions[..ids.len()], x);
-            if best.is_none_or(|(b, _)| inside > b) {
-                let place = Place {
-                    patch: i,
-                    fan: k,
-                    weights,
-                };
-                best = Some((inside, place));
+    /// Where `x`, a point of scene face `face`, lies in the mesh: the fan triangle that holds
+    /// it best (the largest smallest barycentric weight). `None` for a face with no patch.
+    pub(super) fn place(&self, face: u32, x: DVec3) -> Option<Place> {
+        let index = self.faces.get(face as usize)?.as_ref()?;
+        let p = index.in_plane(x);
+        let mut best: Option<(f64, u32, [f64; 3])> = None;
+        let mut consider = |t: u32| {
+            let weights = self.triangles[t as usize].weights(p);
+            let inside = weights[0].min(weights[1]).min(weights[2]);
+            if best.is_none_or(|(b, _, _)| inside > b) {
+                best = Some((inside, t, weights));
             }
         };
-        match self.faces.get(face as usize)? {
-            FaceIndex::Scan(range) => range.clone().for_each(&mut consider),
-            FaceIndex::Grid(grid) => grid
-                .candidates(x)
-                .iter()
-                .for_each(|&i| consider(i as usize)),
+        match &index.grid {
+            Some(grid) => grid.candidates(p).iter().copied().for_each(&mut consider),
+            None => index.triangles.clone().for_each(&mut consider),
         }
-        best.map(|(_, place)| place)
+        best.map(|(_, t, weights)| {
+            let triangle = &self.triangles[t as usize];
+            Place {
+                patch: triangle.patch as usize,
+                fan: triangle.fan as usize,
+                weights,
+            }
+        })
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::{PatchLocator, SCANNED_PATCHES, fan_corners};
+    use super::{PatchLocator, SCANNED_TRIANGLES, fan_corners};
     use crate::hierarchy::fixtures::{GREY, add_parallelogram};
     use crate::mesh::{Mesh, PatchTarget};
     use crate::sampling::stratified_uv;
@@ -185,7 +258,7 @@ mod tests {
         add_parallelogram(&mut scene, "plate", (DVec3::ZERO, small_u, small_v), GREY);
         let mesh = Mesh::build(&scene, PatchTarget::EdgeLength(0.25));
         let count = |face: u32| mesh.patches.iter().filter(|p| p.face == face).count();
-        assert!(count(0) > SCANNED_PATCHES && count(1) <= SCANNED_PATCHES);
+        assert!(count(0) > SCANNED_TRIANGLES && count(1) * 2 <= SCANNED_TRIANGLES);
         let locator = PatchLocator::new(&mesh, scene.faces.len());
         for (face, origin, u, v) in [
             (0, dvec3(-1.0, 0.5, 2.0), u, v),
@@ -194,7 +267,7 @@ mod tests {
             for k in 0..500 {
                 let (s, t) = stratified_uv(k, 7);
                 let x = origin + u * s + v * t;
-                let place = locator.place(&mesh, face, x).expect("the face has patches");
+                let place = locator.place(face, x).expect("the face has patches");
                 assert_eq!(mesh.patches[place.patch].face, face);
                 let corners = fan_corners(&mesh.patches[place.patch], place.fan);
                 let rebuilt: DVec3 = (corners.iter().zip(place.weights))
