@@ -58,8 +58,8 @@ pub(super) struct Displayed {
 /// leaf's area: its share of what viewers see wrong), once, down to one level below
 /// refinement's finest element ([`DISPLAY_FINEST_SHARE`]) and within a share of what
 /// `settings.max_leaves` leaves ([`DISPLAY_ROOM_SHARE`]); then
-/// gathers the corners' light of the leaves as they are (the gather made to decide is kept
-/// when nothing split), each pass of rays reporting its `progress`.
+/// gathers the corners' light of the leaves as they are (the direct light gathered to decide
+/// is kept where nothing split), each pass of rays reporting its `progress`.
 pub(super) fn split_where_direct_light_curves(
     hierarchy: &mut Hierarchy,
     radiosity: Vec<Rgb>,
@@ -92,16 +92,15 @@ pub(super) fn split_where_direct_light_curves(
             radiosity,
         };
     }
-    // The gather made to decide is for leaves about to change: freed before the next.
-    drop(light);
     let chosen: Vec<usize> = worst.into_iter().map(|(_, i)| i).collect();
     let radiosity =
         hierarchy.split_for_display(&chosen, &radiosity, occluders, finest, settings.max_leaves);
-    let mesh = hierarchy.leaf_mesh();
-    let gathered = CornerIndirect::Gathered;
+    let split = hierarchy.leaf_mesh();
+    // Most points are where they were: they keep the direct light gathered to decide.
+    let meshes = (&mesh, &split);
     Displayed {
-        light: CornerLight::new(scene, &mesh, occluders, lights, gathered, progress),
-        mesh,
+        light: light.after_splits(scene, meshes, occluders, lights, progress),
+        mesh: split,
         radiosity,
     }
 }

@@ -3,9 +3,11 @@
 
 use crate::Progress;
 use crate::mesh::Mesh;
+use crate::sampling::splitmix64;
 use crate::scene::Rgb;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::collections::HashMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// How far a shadow ray's origin moves from a corner toward the centre of a patch that uses
@@ -53,6 +55,24 @@ impl GatherPoint {
             }
         }
         corners
+    }
+
+    /// The point to the bit (place, facing, face and its rays' origins) in 128 bits: two
+    /// chained hashes of them, so that two different points of a mesh share it with odds of
+    /// about `n^2 / 2^129`.
+    pub(super) fn fingerprint(&self) -> u128 {
+        let vectors = [self.limit, self.normal]
+            .into_iter()
+            .chain(self.insides.iter().copied());
+        let words = vectors
+            .flat_map(|v| v.to_array().map(f64::to_bits))
+            .chain([u64::from(self.face)]);
+        let (mut a, mut b) = (0x243F_6A88_85A3_08D3u64, 0x1319_8A2E_0370_7344u64);
+        for word in words {
+            a = splitmix64(a ^ word);
+            b = splitmix64(b.rotate_left(17) ^ word);
+        }
+        u128::from(a) << 64 | u128::from(b)
     }
 
     /// One per patch of `mesh`, at its centroid.
@@ -164,6 +184,29 @@ impl<T: Send> PointRows<T> {
             entries.extend(list);
         }
         PointRows { offsets, entries }
+    }
+}
+
+/// What one mesh's gather points gathered, found again by point: a mesh that shares most of
+/// its points with it (the leaves after display splits) gathers only the others.
+pub(super) struct GatheredAt<T> {
+    rows: PointRows<T>,
+    by_point: HashMap<u128, u32>,
+}
+
+impl<T> GatheredAt<T> {
+    /// `rows`, gathered at `points`.
+    pub(super) fn new(points: &[Option<GatherPoint>], rows: PointRows<T>) -> GatheredAt<T> {
+        let by_point = (points.iter().enumerate())
+            .filter_map(|(i, point)| Some((point.as_ref()?.fingerprint(), i as u32)))
+            .collect();
+        GatheredAt { rows, by_point }
+    }
+
+    /// What `point` gathered, if it is one of the points.
+    pub(super) fn at(&self, point: &GatherPoint) -> Option<&[T]> {
+        let i = *self.by_point.get(&point.fingerprint())? as usize;
+        Some(&self.rows.entries[self.rows.offsets[i] as usize..self.rows.offsets[i + 1] as usize])
     }
 }
 

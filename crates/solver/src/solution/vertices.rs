@@ -18,7 +18,7 @@
 //! light's does. Everything is linear in each emitter's emission, so edits still superpose.
 
 use super::bounce::BounceLandings;
-use super::gather_point::{GatherPoint, PointWeights, Tally, inset};
+use super::gather_point::{GatherPoint, GatheredAt, PointWeights, Tally, inset};
 use crate::Progress;
 use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
 use crate::mesh::{Mesh, Patch};
@@ -77,6 +77,13 @@ struct Emitter {
     brightness: f64,
 }
 
+/// The direct light a mesh's corners and centroids gathered, found again by point
+/// ([`CornerLight::after_splits`]).
+struct EarlierDirect {
+    corners: GatheredAt<(u32, f32)>,
+    centres: GatheredAt<(u32, f32)>,
+}
+
 /// Where a corner's indirect light comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CornerIndirect {
@@ -128,6 +135,35 @@ impl CornerLight {
         indirect: CornerIndirect,
         progress: &(dyn Fn(Progress) + Sync),
     ) -> CornerLight {
+        let mut light = CornerLight::ungathered(mesh, occluders, indirect);
+        light.gather_lights(scene, mesh, occluders, lights, progress);
+        light
+    }
+
+    /// This light, gathered on `before` with its indirect light [`CornerIndirect::Averaged`],
+    /// gathered anew on `mesh`, the leaves of the same hierarchy after display splits, with
+    /// its indirect light [`CornerIndirect::Gathered`]: a point of `mesh` that is one of
+    /// `before`'s to the bit (its place, facing, face and rays' origins: the leaves no split
+    /// touched and the corners among them) keeps the direct light it gathered there.
+    pub(super) fn after_splits(
+        self,
+        scene: &Scene,
+        (before, mesh): (&Mesh, &Mesh),
+        occluders: &Occluders,
+        lights: &BTreeSet<u32>,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> CornerLight {
+        let earlier = self.gathered.then(|| EarlierDirect {
+            corners: GatheredAt::new(&GatherPoint::corners_of(before), self.corners),
+            centres: GatheredAt::new(&GatherPoint::centroids_of(before), self.centres),
+        });
+        let mut light = CornerLight::ungathered(mesh, occluders, CornerIndirect::Gathered);
+        light.gather(scene, mesh, occluders, lights, earlier, progress);
+        light
+    }
+
+    /// Nothing gathered yet at the corners of `mesh`, but which patches light reaches there.
+    fn ungathered(mesh: &Mesh, occluders: &Occluders, indirect: CornerIndirect) -> CornerLight {
         let reached = mesh
             .patches
             .par_iter()
@@ -142,16 +178,14 @@ impl CornerLight {
                 reached
             })
             .collect();
-        let mut light = CornerLight {
+        CornerLight {
             corners: PointWeights::none(0),
             centres: PointWeights::none(0),
             gathered: false,
             indirect,
             bounce: None,
             reached,
-        };
-        light.gather_lights(scene, mesh, occluders, lights, progress);
-        light
+        }
     }
 
     /// Gathers the direct light of `scene`'s emitters and of `lights` at the same corners
@@ -163,6 +197,21 @@ impl CornerLight {
         mesh: &Mesh,
         occluders: &Occluders,
         lights: &BTreeSet<u32>,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) {
+        self.gather(scene, mesh, occluders, lights, None, progress);
+    }
+
+    /// [`CornerLight::gather_lights`], taking each point's direct light from `earlier` where
+    /// that gathered it, and casting the bounce's rays where the indirect light is gathered and
+    /// they are not cast yet.
+    fn gather(
+        &mut self,
+        scene: &Scene,
+        mesh: &Mesh,
+        occluders: &Occluders,
+        lights: &BTreeSet<u32>,
+        earlier: Option<EarlierDirect>,
         progress: &(dyn Fn(Progress) + Sync),
     ) {
         let emitters: Vec<Emitter> = scene
@@ -186,19 +235,30 @@ impl CornerLight {
         }
         let corner_points = GatherPoint::corners_of(mesh);
         let centroids = GatherPoint::centroids_of(mesh);
+        // Per point, the emitting faces it sees and its form factor to each, visibility
+        // included; the centroids' rays are seeded apart from the corners'.
+        let tally = Tally::over(mesh, "direct light", progress);
+        let seen =
+            |earlier: Option<&GatheredAt<(u32, f32)>>, point: &GatherPoint, seed| match earlier
+                .and_then(|gathered| gathered.at(point))
+            {
+                Some(row) => row.to_vec(),
+                None => seen_factors(point, &emitters, occluders, seed),
+            };
+        let earlier_corners = earlier.as_ref().map(|e| &e.corners);
+        self.corners = PointWeights::at_points(&corner_points, &tally, |index, point| {
+            seen(earlier_corners, point, index)
+        });
+        let earlier_centres = earlier.as_ref().map(|e| &e.centres);
+        self.centres = PointWeights::at_points(&centroids, &tally, |index, point| {
+            seen(earlier_centres, point, mesh.positions.len() + index)
+        });
+        // Freed before the bounce's rays, the largest part of the gather.
+        drop(earlier);
         if self.indirect == CornerIndirect::Gathered && self.bounce.is_none() {
             let points = (&corner_points[..], &centroids[..]);
             self.cast_bounce(scene, mesh, occluders, points, progress);
         }
-        // Per point, the emitting faces it sees and its form factor to each, visibility
-        // included; the centroids' rays are seeded apart from the corners'.
-        let tally = Tally::over(mesh, "direct light", progress);
-        self.corners = PointWeights::at_points(&corner_points, &tally, |index, point| {
-            seen_factors(point, &emitters, occluders, index)
-        });
-        self.centres = PointWeights::at_points(&centroids, &tally, |index, point| {
-            seen_factors(point, &emitters, occluders, mesh.positions.len() + index)
-        });
     }
 
     /// This light, built with [`CornerIndirect::Averaged`] on the same `scene` and `mesh`,
@@ -597,17 +657,19 @@ mod tests {
     use super::{CornerLight, interpolated_mean, second_order_mean};
     use crate::accuracy::evaluate;
     use crate::hierarchy::fixtures::{
-        GREY, add_parallelogram, closed_cube, floor_cut_by_a_box, probes_under_a_lamp,
+        GREY, add_parallelogram, build, closed_cube, floor_cut_by_a_box, probes_under_a_lamp,
         room_with_a_box,
     };
     use crate::mesh::Mesh;
     use crate::scene::{Material, Rgb, Scene};
+    use crate::solution::gather_point::GatherPoint;
     use crate::visibility::Occluders;
     use crate::{
         HierarchySettings, Method, PatchTarget, Progress, SolveRequest, SolverSettings,
         no_progress, solve_scene,
     };
     use glam::{DVec3, dvec3};
+    use std::collections::BTreeMap;
     use std::collections::BTreeSet;
     use std::f64::consts::PI;
     use std::sync::Mutex;
@@ -740,11 +802,58 @@ mod tests {
         let reports = reports.into_inner().expect("no panic");
         let points = mesh.positions.len() + mesh.patches.len();
         let passes: Vec<&str> = reports.iter().map(|(pass, _, _)| pass.as_str()).collect();
-        assert_eq!(passes, ["bounce rays", "direct light"], "{reports:?}");
+        assert_eq!(passes, ["direct light", "bounce rays"], "{reports:?}");
         assert!(
             reports
                 .iter()
                 .all(|&(_, done, total)| (done, total) == (points, points))
+        );
+    }
+
+    #[test]
+    fn the_points_a_display_split_leaves_alone_keep_the_direct_light_they_gathered() {
+        // The room with a box on its floor (penumbrae around the box, where a point's rays
+        // decide its light), its leaves gathered, then one leaf in eight split for the display.
+        // Each point of the new leaves that is one of the old ones to the bit (the leaves left
+        // alone and the corners among them) reads the direct light it read before, though
+        // its place in the mesh, which seeds its rays, moved; the others gather their own.
+        let scene = room_with_a_box();
+        let mut hierarchy = build(&scene, 0.3);
+        let occluders = Occluders::new(&scene);
+        let lights = BTreeSet::new();
+        let before = hierarchy.leaf_mesh();
+        let averaged = super::CornerIndirect::Averaged;
+        let light = CornerLight::new(&scene, &before, &occluders, &lights, averaged, &no_progress);
+        let face_emission: Vec<Rgb> = scene.faces.iter().map(|f| f.emission).collect();
+        let read = |light: &CornerLight, mesh: &Mesh| {
+            let corners = GatherPoint::corners_of(mesh).into_iter();
+            let centroids = GatherPoint::centroids_of(mesh).into_iter();
+            let values = (light.corners.read(&face_emission).into_iter())
+                .chain(light.centres.read(&face_emission));
+            (corners.chain(centroids).zip(values))
+                .filter_map(|(point, value)| Some((point?.fingerprint(), value)))
+                .collect::<Vec<_>>()
+        };
+        let earlier: BTreeMap<u128, Rgb> = read(&light, &before).into_iter().collect();
+        let chosen: Vec<usize> = (0..before.patches.len()).step_by(8).collect();
+        let radiosity = vec![Rgb::ZERO; before.patches.len()];
+        hierarchy.split_for_display(&chosen, &radiosity, &occluders, 0.0, usize::MAX);
+        let after = hierarchy.leaf_mesh();
+        let light =
+            light.after_splits(&scene, (&before, &after), &occluders, &lights, &no_progress);
+        let (mut kept, mut gathered) = (0, 0);
+        for (point, value) in read(&light, &after) {
+            match earlier.get(&point) {
+                Some(&was) => {
+                    assert_eq!(value, was);
+                    kept += 1;
+                }
+                None => gathered += 1,
+            }
+        }
+        assert!(
+            kept > 100 && gathered > 100,
+            "{kept} kept, {gathered} gathered"
         );
     }
 
