@@ -139,12 +139,13 @@ impl FaceGrid {
     }
 }
 
-/// One scene face's plane and how its triangles are searched.
+/// One scene face's plane and how its triangles are searched (boxed, the grid of the few faces
+/// that have one: a million faces of soup, a patch each, are a million of these).
 struct FaceIndex {
     origin: DVec3,
     axes: [DVec3; 2],
     triangles: Range<u32>,
-    grid: Option<FaceGrid>,
+    grid: Option<Box<FaceGrid>>,
 }
 
 impl FaceIndex {
@@ -203,7 +204,7 @@ impl PatchLocator {
                 }
                 index.triangles = start as u32..triangles.len() as u32;
                 if boxes.len() > SCANNED_TRIANGLES {
-                    index.grid = Some(FaceGrid::new(&boxes, start as u32));
+                    index.grid = Some(Box::new(FaceGrid::new(&boxes, start as u32)));
                 }
                 Some(index)
             })
