@@ -59,7 +59,7 @@ struct RayBudget {
 /// 10: the furnished room (a closed room, where light bounces most) 8.36 / 7.30 / 6.94 / 6.27
 /// / 5.69% (energy −0.2% → +1.1%), the monastery 7.28 / 7.24 / - / 7.20 / 7.20%, the Cornell
 /// box at 0.13 1.55 / 1.53 / 1.54 / 1.54 / 1.54%, the teddy bear and the monastery piece the
-/// same at each; none with 0 and 1 once read 13.0 and 10.6% on the monastery. Each costs one
+/// same at each (with 0 and 1, the monastery once read 13.0 and 10.6%). Each costs one
 /// reading of the rays' landings, no rays: no time to tell on the monastery. A fixed count
 /// keeps the values linear in the solution (edits sum them).
 const GATHERED_BOUNCES: usize = 10;
@@ -237,7 +237,7 @@ impl CornerLight {
             self.bounce = None;
             return;
         }
-        let mut corner_points = GatherPoint::corners_of(mesh);
+        let corner_points = GatherPoint::corners_of(mesh);
         let centroids = GatherPoint::centroids_of(mesh);
         // Per point, the emitting faces it sees and its form factor to each, visibility
         // included; the centroids' rays are seeded apart from the corners'.
@@ -259,15 +259,8 @@ impl CornerLight {
         });
         // Freed before the bounce's rays, the largest part of the gather.
         drop(earlier);
-        // A corner light reaches from none of its patches takes each bounce from their
-        // centroids (`extrapolate_unreached`): it casts none (13% of the monastery's corners).
-        for (point, unreached) in corner_points.iter_mut().zip(self.unreached_corners(mesh)) {
-            if unreached {
-                *point = None;
-            }
-        }
         if self.indirect == CornerIndirect::Gathered && self.bounce.is_none() {
-            let points = (&corner_points[..], &centroids[..]);
+            let points = (corner_points, &centroids[..]);
             self.cast_bounce(scene, mesh, occluders, points, progress);
         }
     }
@@ -288,22 +281,29 @@ impl CornerLight {
                 GatherPoint::corners_of(mesh),
                 GatherPoint::centroids_of(mesh),
             );
-            self.cast_bounce(scene, mesh, occluders, (&corners, &centroids), progress);
+            self.cast_bounce(scene, mesh, occluders, (corners, &centroids), progress);
         }
         self
     }
 
-    /// Casts the bounce's rays from `points`, the corners and centroids of `mesh`.
+    /// Casts the bounce's rays from the corners and centroids of `mesh` (`points`). A corner
+    /// light reaches from none of its patches takes each bounce from their centroids
+    /// (`extrapolate_unreached`): it casts none (13% of the monastery's corners).
     fn cast_bounce(
         &mut self,
         scene: &Scene,
         mesh: &Mesh,
         occluders: &Occluders,
-        points: (&[Option<GatherPoint>], &[Option<GatherPoint>]),
+        (mut corners, centroids): (Vec<Option<GatherPoint>>, &[Option<GatherPoint>]),
         progress: &(dyn Fn(Progress) + Sync),
     ) {
+        for (point, unreached) in corners.iter_mut().zip(self.unreached_corners(mesh)) {
+            if unreached {
+                *point = None;
+            }
+        }
         let tally = Tally::over(mesh, "bounce rays", progress);
-        let faces = scene.faces.len();
+        let (faces, points) = (scene.faces.len(), (&corners[..], centroids));
         self.bounce = Some(BounceLandings::cast(mesh, points, occluders, faces, &tally));
     }
 
