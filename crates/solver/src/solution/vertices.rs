@@ -243,13 +243,13 @@ impl CornerLight {
         // Per point, the emitting faces it sees and its form factor to each, visibility
         // included; the centroids' rays are seeded apart from the corners'.
         let tally = Tally::over(mesh, "direct light", progress);
-        let seen =
-            |earlier: Option<&GatheredAt<(u32, f32)>>, point: &GatherPoint, seed| match earlier
-                .and_then(|gathered| gathered.at(point))
-            {
-                Some(row) => row.to_vec(),
-                None => seen_factors(point, &emitters, occluders, seed),
-            };
+        let seen = |earlier: Option<&GatheredAt<(u32, f32)>>, point: &GatherPoint, seed| {
+            let row = earlier.and_then(|gathered| gathered.at(point));
+            row.map_or_else(
+                || seen_factors(point, &emitters, occluders, seed),
+                <[_]>::to_vec,
+            )
+        };
         let earlier_corners = earlier.as_ref().map(|e| &e.corners);
         self.corners = PointWeights::at_points(&corner_points, &tally, |index, point| {
             seen(earlier_corners, point, index)
