@@ -53,9 +53,229 @@ pub fn cosine_direction(normal: DVec3, u: f64, v: f64) -> DVec3 {
     .normalize()
 }
 
+/// A polygon as seen from a point, set up to draw directions uniformly over the solid angle it
+/// covers: each fan triangle by Arvo's stratified method (Arvo 1995, "Stratified Sampling of
+/// Spherical Triangles", in the robust form of pbrt 4e, 6.5.4), picked by its share of the
+/// solid angle. Drawn by area instead, points on a large emitter near the point weigh as
+/// differently as their `cos / r^2` (a sky over a courtyard: a few points overhead carry the
+/// estimate); drawn by solid angle, each weighs only the cosine at the point.
+#[derive(Clone, Copy, Debug)]
+pub struct SphericalPolygon {
+    triangles: [SphericalTriangle; 2],
+    /// Fan triangles: one for a triangle, two for a quad.
+    count: usize,
+}
+
+impl SphericalPolygon {
+    /// The polygon with `corners` (three or four, convex) as seen from `origin`, or `None`
+    /// where a corner lies on the origin or a fan triangle is seen edge-on.
+    pub fn seen_from(origin: DVec3, corners: &[DVec3]) -> Option<SphericalPolygon> {
+        let direction = |p: DVec3| (p - origin).try_normalize();
+        let (a, b, c) = (
+            direction(corners[0])?,
+            direction(corners[1])?,
+            direction(corners[2])?,
+        );
+        let first = SphericalTriangle::new(a, b, c)?;
+        let (second, count) = match corners.get(3) {
+            Some(&d) => (SphericalTriangle::new(a, c, direction(d)?)?, 2),
+            None => (first, 1),
+        };
+        Some(SphericalPolygon {
+            triangles: [first, second],
+            count,
+        })
+    }
+
+    /// The solid angle it covers, steradians.
+    pub fn solid_angle(&self) -> f64 {
+        self.triangles[..self.count]
+            .iter()
+            .map(SphericalTriangle::solid_angle)
+            .sum()
+    }
+
+    /// A unit direction uniform over its solid angle, from two uniform numbers in [0, 1):
+    /// `u` picks the triangle and then the sub-area within it, so stratified `(u, v)` stay
+    /// stratified.
+    pub fn direction(&self, u: f64, v: f64) -> DVec3 {
+        let first = self.triangles[0].solid_angle();
+        let picked = u * self.solid_angle();
+        if self.count == 1 || picked < first {
+            self.triangles[0].direction(picked / first, v)
+        } else {
+            let second = self.triangles[1].solid_angle();
+            self.triangles[1].direction(((picked - first) / second).min(1.0), v)
+        }
+    }
+}
+
+/// A spherical triangle: its vertices' unit directions and its angle at the first.
+#[derive(Clone, Copy, Debug)]
+struct SphericalTriangle {
+    a: DVec3,
+    b: DVec3,
+    c: DVec3,
+    alpha: f64,
+    /// The sum of its three angles: its solid angle plus pi.
+    angle_sum: f64,
+}
+
+impl SphericalTriangle {
+    fn new(a: DVec3, b: DVec3, c: DVec3) -> Option<SphericalTriangle> {
+        let (n_ab, n_bc, n_ca) = (
+            a.cross(b).try_normalize()?,
+            b.cross(c).try_normalize()?,
+            c.cross(a).try_normalize()?,
+        );
+        let alpha = angle_between(n_ab, -n_ca);
+        let angle_sum = alpha + angle_between(n_bc, -n_ab) + angle_between(n_ca, -n_bc);
+        (angle_sum > PI).then_some(SphericalTriangle {
+            a,
+            b,
+            c,
+            alpha,
+            angle_sum,
+        })
+    }
+
+    fn solid_angle(&self) -> f64 {
+        self.angle_sum - PI
+    }
+
+    /// Arvo's map: `u` sets the sub-triangle's area, which fixes the point `c'` on the arc
+    /// from `a` to `c`; `v` picks the point on the arc from `b` to `c'`.
+    fn direction(&self, u: f64, v: f64) -> DVec3 {
+        let (sin_alpha, cos_alpha) = self.alpha.sin_cos();
+        let (sin_area, cos_area) = (PI + u * (self.angle_sum - PI)).sin_cos();
+        let sin_phi = sin_area * cos_alpha - cos_area * sin_alpha;
+        let cos_phi = cos_area * cos_alpha + sin_area * sin_alpha;
+        let k1 = cos_phi + cos_alpha;
+        let k2 = sin_phi - sin_alpha * self.a.dot(self.b);
+        let cos_b = ((k2 + (k2 * cos_phi - k1 * sin_phi) * cos_alpha)
+            / ((k2 * sin_phi + k1 * cos_phi) * sin_alpha))
+            .clamp(-1.0, 1.0);
+        let c_prime =
+            self.a * cos_b + across(self.c, self.a) * (1.0 - cos_b * cos_b).max(0.0).sqrt();
+        let cos_theta = 1.0 - v * (1.0 - c_prime.dot(self.b));
+        let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+        (self.b * cos_theta + across(c_prime, self.b) * sin_theta).normalize()
+    }
+}
+
+/// The unit vector along the part of `v` perpendicular to the unit `w` (Gram-Schmidt); zero
+/// where `v` lies along `w`.
+fn across(v: DVec3, w: DVec3) -> DVec3 {
+    (v - w * v.dot(w)).normalize_or_zero()
+}
+
+/// The angle between unit vectors, accurate near 0 and pi too (pbrt 4e, 3.3.1).
+fn angle_between(v: DVec3, w: DVec3) -> f64 {
+    if v.dot(w) < 0.0 {
+        PI - 2.0 * ((v + w).length() / 2.0).min(1.0).asin()
+    } else {
+        2.0 * ((w - v).length() / 2.0).min(1.0).asin()
+    }
+}
+
 #[cfg(test)]
 mod tests {
-    use super::{splitmix64, stratified_uv};
+    use super::{SphericalPolygon, splitmix64, stratified_uv, unit_interval};
+    use crate::geometry::{Polygon, point_to_polygon_form_factor};
+    use glam::{DVec3, dvec3};
+    use std::f64::consts::PI;
+
+    /// A square, a long sliver, a tilted quad and a triangle, each seen from points near and
+    /// far, beside and over it.
+    fn polygons_and_points() -> Vec<(Polygon, DVec3, DVec3)> {
+        let square = Polygon::quad(
+            dvec3(-1.0, -1.0, 2.0),
+            dvec3(-1.0, 1.0, 2.0),
+            dvec3(1.0, 1.0, 2.0),
+            dvec3(1.0, -1.0, 2.0),
+        );
+        let sliver = Polygon::quad(
+            dvec3(-50.0, 0.0, 0.3),
+            dvec3(-50.0, 0.05, 0.3),
+            dvec3(50.0, 0.05, 0.3),
+            dvec3(50.0, 0.0, 0.3),
+        );
+        let tilted = Polygon::quad(
+            dvec3(0.0, 0.0, 1.0),
+            dvec3(0.0, 2.0, 1.5),
+            dvec3(3.0, 2.0, 2.5),
+            dvec3(3.0, 0.0, 2.0),
+        );
+        let triangle = Polygon::triangle(
+            dvec3(0.5, 0.0, 1.0),
+            dvec3(0.0, 0.7, 1.2),
+            dvec3(-0.6, -0.4, 0.9),
+        );
+        let mut cases = Vec::new();
+        for polygon in [square, sliver, tilted, triangle] {
+            for (point, normal) in [
+                (DVec3::ZERO, DVec3::Z),
+                (dvec3(0.3, -0.2, 0.0), dvec3(0.3, 0.1, 1.0).normalize()),
+                (dvec3(4.0, 1.0, 0.0), dvec3(-1.0, 0.0, 1.0).normalize()),
+                (dvec3(0.1, 0.1, -20.0), DVec3::Z),
+            ] {
+                cases.push((polygon, point, normal));
+            }
+        }
+        cases
+    }
+
+    #[test]
+    fn directions_over_a_polygons_solid_angle_integrate_its_form_factor() {
+        // Uniform over the solid angle, the mean cosine at the point times the solid angle is
+        // the integral of cos d(omega), pi times Lambert's exact factor (the polygon's facing
+        // does not enter), and every direction meets the polygon.
+        for (polygon, point, normal) in polygons_and_points() {
+            let view = SphericalPolygon::seen_from(point, polygon.corners()).expect("seen");
+            let n: u32 = 1 << 16;
+            let (plane_normal, on_plane) = (polygon.normal(), polygon.corners()[0]);
+            let mut cosines = 0.0;
+            for k in 0..n {
+                // Independent uniform numbers: unbiased on any polygon (a sliver's map is
+                // too uneven near its ends for a grid's midpoints to integrate within 0.1%).
+                let uniform = |j: u64| unit_interval(splitmix64(2 * u64::from(k) + j));
+                let w = view.direction(uniform(0), uniform(1));
+                assert!((w.length() - 1.0).abs() < 1e-12);
+                let hit = point + w * (on_plane - point).dot(plane_normal) / w.dot(plane_normal);
+                let closest = polygon.closest_point(hit);
+                assert!(
+                    closest.distance(hit) < 1e-9 * (1.0 + hit.distance(point)),
+                    "{w} from {point} leaves the polygon at {hit}"
+                );
+                cosines += normal.dot(w).max(0.0);
+            }
+            let integral = cosines / f64::from(n) * view.solid_angle();
+            let facing = if plane_normal.dot(point - on_plane) > 0.0 {
+                plane_normal
+            } else {
+                -plane_normal
+            };
+            let exact = PI * point_to_polygon_form_factor(point, normal, &polygon, facing);
+            assert!(
+                (integral - exact).abs() < 1e-2 * exact,
+                "{integral} against {exact} from {point}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_cube_face_covers_a_sixth_of_the_sphere_from_the_cube_centre() {
+        let face = [
+            dvec3(-1.0, -1.0, 1.0),
+            dvec3(1.0, -1.0, 1.0),
+            dvec3(1.0, 1.0, 1.0),
+            dvec3(-1.0, 1.0, 1.0),
+        ];
+        let view = SphericalPolygon::seen_from(DVec3::ZERO, &face).expect("seen");
+        assert!((view.solid_angle() - 4.0 * PI / 6.0).abs() < 1e-12);
+        // Seen edge-on, a polygon has no solid angle to draw from.
+        assert!(SphericalPolygon::seen_from(dvec3(0.0, 0.0, 1.0), &face).is_none());
+    }
 
     #[test]
     fn stratified_points_are_roberts_sequence_kept_off_the_border() {

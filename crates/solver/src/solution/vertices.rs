@@ -22,7 +22,7 @@ use super::gather_point::{GatherPoint, GatheredAt, PointWeights, Tally, inset};
 use crate::Progress;
 use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
 use crate::mesh::{Mesh, Patch};
-use crate::sampling::{pair_seed, stratified_uv};
+use crate::sampling::{SphericalPolygon, pair_seed, stratified_uv};
 use crate::scene::{Rgb, Scene};
 use crate::transport::Transport;
 use crate::visibility::Occluders;
@@ -45,6 +45,15 @@ const MINOR_RAYS: RayBudget = RayBudget {
 };
 /// Below this share of a corner's unoccluded direct light an emitter is minor.
 const MINOR_SHARE: f64 = 0.05;
+
+/// The least solid angle an emitter must cover, steradians, for its shadow rays to be drawn by
+/// solid angle ([`seen_share`]), from every point they start from. A sky over a building
+/// covers 2-3 sr and its kernel varies a hundredfold across it: drawn by solid angle, the
+/// monastery read 6.0 / 6.3 / 5.7% smooth RMS instead of 7.2 / 6.7 / 7.4% (three seeds of its
+/// gathers, same rays, same time). A lamp covers far less (1 sr is a 1 m square at 1 m): its
+/// kernel hardly varies, and Arvo's map stratifies points less evenly than the area's, so a
+/// threshold of 0.01 sr made the shadow slab read 0.85% instead of 0.67% (docs/BENCHMARKS.md).
+const MIN_SOLID_ANGLE: f64 = 1.0;
 
 /// Shadow rays for one corner and emitter.
 struct RayBudget {
@@ -619,7 +628,11 @@ fn unoccluded_factor(corner: &GatherPoint, emitter: &Emitter) -> f64 {
 
 /// The share of the corner's unoccluded factor to the emitter that visibility lets through:
 /// the kernel-weighted share of stratified emitter points seen from just inside the patches
-/// around the corner (the first rays of `budget` alone where they all agree).
+/// around the corner (the first rays of `budget` alone where they all agree). The points are
+/// drawn by solid angle where the emitter covers at least [`MIN_SOLID_ANGLE`] from each of
+/// them, so each weighs only its cosine at the corner and the rays go where the light comes
+/// from (ground under an eave and a 600 m sky: RMS 9.4% -> 4.8% with the same rays); by area
+/// on smaller emitters.
 fn seen_share(
     corner: &GatherPoint,
     emitter: &Emitter,
@@ -628,33 +641,91 @@ fn seen_share(
     budget: &RayBudget,
 ) -> f64 {
     let seed = pair_seed(index, emitter.face as usize);
+    let drawn = EmitterPoints::for_corner(corner, emitter);
     let (mut seen, mut total) = (0.0, 0.0);
     let mut sample = |k: u32| {
-        let (u, v) = stratified_uv(k, seed);
-        let target = emitter.polygon.point_at(u, v);
-        let origin = corner.insides[k as usize % corner.insides.len()];
-        let d = target - origin;
-        // cos cos / r^2, the point-to-point kernel up to 1/pi: what each point contributes.
-        let kernel = corner.normal.dot(d).max(0.0) * (-emitter.normal).dot(d).max(0.0)
-            / d.length_squared().powi(2);
-        let clear = occluders.segment_is_clear(origin, target, [corner.face, emitter.face]);
-        total += kernel;
-        if clear {
-            seen += kernel;
+        let inside = k as usize % corner.insides.len();
+        let origin = corner.insides[inside];
+        let (target, weight) = drawn.point(corner, emitter, inside, stratified_uv(k, seed));
+        // Below the corner's horizon a point contributes nothing: no ray, no vote.
+        if !(weight > 0.0 && target.is_finite()) {
+            return None;
         }
-        clear
+        let clear = occluders.segment_is_clear(origin, target, [corner.face, emitter.face]);
+        total += weight;
+        if clear {
+            seen += weight;
+        }
+        Some(clear)
     };
-    let first: Vec<bool> = (0..budget.first).map(&mut sample).collect();
-    if first.iter().all(|&clear| clear) {
+    let first: Vec<bool> = (0..budget.first).filter_map(&mut sample).collect();
+    if !first.is_empty() && first.iter().all(|&clear| clear) {
         return 1.0;
     }
-    if first.iter().all(|&clear| !clear) {
+    if !first.is_empty() && first.iter().all(|&clear| !clear) {
         return 0.0;
     }
     (budget.first..budget.penumbra).for_each(|k| {
         sample(k);
     });
     if total > 0.0 { seen / total } else { 0.0 }
+}
+
+/// How a corner's shadow rays draw their points on one emitter ([`seen_share`]).
+enum EmitterPoints {
+    /// Uniformly over the solid angle it covers from each point the rays start from.
+    BySolidAngle(Vec<SphericalPolygon>),
+    /// Uniformly over its area.
+    ByArea,
+}
+
+impl EmitterPoints {
+    /// By solid angle where `emitter` covers at least [`MIN_SOLID_ANGLE`] from every point
+    /// the rays of `corner` start from, else by area.
+    fn for_corner(corner: &GatherPoint, emitter: &Emitter) -> EmitterPoints {
+        (corner.insides.iter())
+            .map(|&origin| {
+                SphericalPolygon::seen_from(origin, emitter.polygon.corners())
+                    .filter(|view| view.solid_angle() >= MIN_SOLID_ANGLE)
+            })
+            .collect::<Option<Vec<_>>>()
+            .map_or(EmitterPoints::ByArea, EmitterPoints::BySolidAngle)
+    }
+
+    /// The point drawn at `(u, v)` for a ray from the corner's `inside`-th start, and its
+    /// weight: an estimate of the integral of the cosine at the corner over the emitter's
+    /// solid angle (the same integral either way, so shares of it compare).
+    fn point(
+        &self,
+        corner: &GatherPoint,
+        emitter: &Emitter,
+        inside: usize,
+        (u, v): (f64, f64),
+    ) -> (DVec3, f64) {
+        let origin = corner.insides[inside];
+        match self {
+            // The emitter's cosine over r^2 is in the measure: each point weighs the cosine
+            // at the corner, times the solid angle.
+            EmitterPoints::BySolidAngle(views) => {
+                // The whole square: the border `stratified_uv` keeps off is no patch edge
+                // here, and left out it biased a sliver's integral by 0.3%.
+                let unit = |x: f64| ((x - 1e-3) / (1.0 - 2e-3)).clamp(0.0, 1.0);
+                let w = views[inside].direction(unit(u), unit(v));
+                let on_plane = emitter.polygon.corners()[0] - origin;
+                let distance = on_plane.dot(emitter.normal) / w.dot(emitter.normal);
+                let weight = corner.normal.dot(w).max(0.0) * views[inside].solid_angle();
+                (origin + w * distance, weight)
+            }
+            // cos cos / r^2, the point-to-point kernel, times the area.
+            EmitterPoints::ByArea => {
+                let target = emitter.polygon.point_at(u, v);
+                let d = target - origin;
+                let kernel = corner.normal.dot(d).max(0.0) * (-emitter.normal).dot(d).max(0.0)
+                    / d.length_squared().powi(2);
+                (target, kernel * emitter.polygon.area())
+            }
+        }
+    }
 }
 
 /// `values` with what round-off left below zero raised to zero: radiosity is a sum of
@@ -666,8 +737,9 @@ pub fn clamp_below_zero(mut values: Vec<Rgb>) -> Vec<Rgb> {
 
 #[cfg(test)]
 mod tests {
-    use super::{CornerLight, interpolated_mean, second_order_mean};
+    use super::{CornerLight, Emitter, interpolated_mean, second_order_mean, seen_factors};
     use crate::accuracy::evaluate;
+    use crate::geometry::point_to_polygon_form_factor;
     use crate::hierarchy::fixtures::{
         GREY, add_parallelogram, build, closed_cube, floor_cut_by_a_box, probes_under_a_lamp,
         room_with_a_box,
@@ -768,6 +840,67 @@ mod tests {
                 "hierarchical {hierarchical}: {got} against Howell B-3 {expected}"
             );
         }
+    }
+
+    #[test]
+    fn a_point_under_an_eave_sees_the_sky_around_it() {
+        // A sky 600 m square 90 m up and an eave 10 x 7.5 m at 3 m, wholly inside the sky's
+        // view from 225 points of the ground from under the eave to the open: the sky a
+        // point sees is Lambert's factor to the sky less that to the eave. Drawn by area, most
+        // points on such a sky lie far off at a tiny kernel and a few overhead carry the
+        // estimate (measured: RMS 9.4% over the points, 64 rays); drawn by solid angle, 4.8%,
+        // unbiased but for the sampling.
+        let mut scene = Scene::default();
+        let (x, z) = (DVec3::X, DVec3::Z);
+        let sky = Material {
+            reflectance: Rgb::ZERO,
+            emission: Rgb::ONE,
+        };
+        add_parallelogram(
+            &mut scene,
+            "ground",
+            (dvec3(-300.0, 0.0, -300.0), z * 600.0, x * 600.0),
+            GREY,
+        );
+        add_parallelogram(
+            &mut scene,
+            "eave",
+            (dvec3(-5.0, 3.0, 0.5), x * 10.0, z * 7.5),
+            GREY,
+        );
+        add_parallelogram(
+            &mut scene,
+            "sky",
+            (dvec3(-300.0, 90.0, -300.0), x * 600.0, z * 600.0),
+            sky,
+        );
+        let occluders = Occluders::new(&scene);
+        let face = |i: usize| scene.faces[i].polygon;
+        let emitters = [Emitter {
+            polygon: face(2),
+            normal: face(2).normal(),
+            face: 2,
+            brightness: 1.0,
+        }];
+        let (mut squared, mut signed, mut n) = (0.0, 0.0, 0.0);
+        for i in 0..15 * 15 {
+            let at = dvec3(-7.0 + (i % 15) as f64, 0.0, -3.0 + (i / 15) as f64);
+            let point = GatherPoint {
+                limit: at,
+                normal: DVec3::Y,
+                face: 0,
+                insides: vec![at],
+            };
+            let seen = seen_factors(&point, &emitters, &occluders, i);
+            let got = seen.first().map_or(0.0, |&(_, f)| f64::from(f));
+            let exact = point_to_polygon_form_factor(at, DVec3::Y, &face(2), face(2).normal())
+                - point_to_polygon_form_factor(at, DVec3::Y, &face(1), face(1).normal());
+            let error = (got - exact) / exact;
+            (squared, signed, n) = (squared + error * error, signed + error, n + 1.0);
+        }
+        let (rms, bias) = ((squared / n).sqrt(), signed / n);
+        println!("RMS {rms}, bias {bias}");
+        assert!(rms < 0.06 && bias.abs() < 0.01, "RMS {rms}, bias {bias}");
     }
 
     /// A grey 2 x 2 floor (face 0) meshed at 0.5 under an equal grey plate facing down 1
@@ -1050,7 +1183,10 @@ mod tests {
     fn a_furnace_with_a_box_inside_is_exact_on_patches_and_within_sampling_at_vertices() {
         // B = 2 wherever light reaches. The patches are exact (rows of closed views sum to
         // one); the vertices gather each face's visibility apart, so the factors they see sum
-        // to one only up to that sampling (measured: RMS 0.15%, worst 1.6%).
+        // to one only up to that sampling (measured: RMS 0.30% dense, 0.25% hierarchical,
+        // worst 2.3%; 0.15% and 1.6% when every face was drawn by area: the walls cover more
+        // than `MIN_SOLID_ANGLE` from most corners, and drawn by solid angle a small hidden
+        // part of one escapes the first rays more often).
         let mut scene = room_with_a_box();
         scene.faces.iter_mut().for_each(|f| f.emission = Rgb::ONE);
         let under_the_box =
@@ -1084,7 +1220,7 @@ mod tests {
                 "hierarchical {hierarchical}: patches {patch_worst}, vertices RMS {rms} worst {worst}"
             );
             assert!(
-                rms < 0.003 && worst < 0.03,
+                rms < 0.004 && worst < 0.03,
                 "hierarchical {hierarchical}: vertices off by {rms} RMS, {worst} at worst"
             );
         }
