@@ -693,8 +693,8 @@ impl EmitterPoints {
     }
 
     /// The point drawn at `(u, v)` for a ray from the corner's `inside`-th start, and its
-    /// weight: an estimate of the integral of the cosine at the corner over the emitter's
-    /// solid angle (the same integral either way, so shares of it compare).
+    /// weight, relative to the other points of the same draw (one corner's points are all
+    /// drawn one way, so only their ratios enter the share).
     fn point(
         &self,
         corner: &GatherPoint,
@@ -716,13 +716,13 @@ impl EmitterPoints {
                 let weight = corner.normal.dot(w).max(0.0) * views[inside].solid_angle();
                 (origin + w * distance, weight)
             }
-            // cos cos / r^2, the point-to-point kernel, times the area.
+            // cos cos / r^2, the point-to-point kernel.
             EmitterPoints::ByArea => {
                 let target = emitter.polygon.point_at(u, v);
                 let d = target - origin;
                 let kernel = corner.normal.dot(d).max(0.0) * (-emitter.normal).dot(d).max(0.0)
                     / d.length_squared().powi(2);
-                (target, kernel * emitter.polygon.area())
+                (target, kernel)
             }
         }
     }
