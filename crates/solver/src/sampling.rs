@@ -29,6 +29,14 @@ pub fn unit_interval(bits: u64) -> f64 {
 /// The k-th point of Roberts' R2 sequence, rotated by `offset` (Cranley-Patterson), kept off the
 /// patch border so that a ray never starts on a shared edge.
 pub fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
+    let inset = |x: f64| 1e-3 + (1.0 - 2e-3) * x;
+    let (u, v) = roberts_point(k, offset);
+    (inset(u), inset(v))
+}
+
+/// The k-th point of Roberts' R2 sequence, rotated by `offset` (Cranley-Patterson), over the
+/// whole unit square: for draws whose border is no patch edge.
+pub fn roberts_point(k: u32, offset: u64) -> (f64, f64) {
     // Roberts 2018, "The Unreasonable Effectiveness of Quasirandom Sequences": 1/phi_2, 1/phi_2^2.
     const A1: f64 = 0.754_877_666_246_692_7;
     const A2: f64 = 0.569_840_290_998_053_2;
@@ -38,8 +46,8 @@ pub fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {
     );
     // x >= 0, so its fraction is x less its integer part, the same bits as `fract` without the
     // libm `trunc` call it becomes on baseline x86-64 (3.5% of a large town's solve).
-    let inset = |x: f64| 1e-3 + (1.0 - 2e-3) * (x - x as u64 as f64);
-    (inset(u0 + k as f64 * A1), inset(v0 + k as f64 * A2))
+    let fraction = |x: f64| x - x as u64 as f64;
+    (fraction(u0 + k as f64 * A1), fraction(v0 + k as f64 * A2))
 }
 
 /// A unit direction about the unit `normal` with density `cos / pi`, from two uniform numbers

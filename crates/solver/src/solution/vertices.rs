@@ -22,7 +22,7 @@ use super::gather_point::{GatherPoint, GatheredAt, PointWeights, Tally, inset};
 use crate::Progress;
 use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
 use crate::mesh::{Mesh, Patch};
-use crate::sampling::{SphericalPolygon, pair_seed, stratified_uv};
+use crate::sampling::{SphericalPolygon, pair_seed, roberts_point, stratified_uv};
 use crate::scene::{Rgb, Scene};
 use crate::transport::Transport;
 use crate::visibility::Occluders;
@@ -646,7 +646,7 @@ fn seen_share(
     let mut sample = |k: u32| {
         let inside = k as usize % corner.insides.len();
         let origin = corner.insides[inside];
-        let (target, weight) = drawn.point(corner, emitter, inside, stratified_uv(k, seed));
+        let (target, weight) = drawn.point(corner, emitter, inside, (k, seed));
         // Below the corner's horizon a point contributes nothing: no ray, no vote.
         if !(weight > 0.0 && target.is_finite()) {
             return None;
@@ -692,15 +692,15 @@ impl EmitterPoints {
             .map_or(EmitterPoints::ByArea, EmitterPoints::BySolidAngle)
     }
 
-    /// The point drawn at `(u, v)` for a ray from the corner's `inside`-th start, and its
-    /// weight, relative to the other points of the same draw (one corner's points are all
-    /// drawn one way, so only their ratios enter the share).
+    /// The `k`-th point of the pattern seeded `seed`, drawn for a ray from the corner's
+    /// `inside`-th start, and its weight, relative to the other points of the same draw (one
+    /// corner's points are all drawn one way, so only their ratios enter the share).
     fn point(
         &self,
         corner: &GatherPoint,
         emitter: &Emitter,
         inside: usize,
-        (u, v): (f64, f64),
+        (k, seed): (u32, u64),
     ) -> (DVec3, f64) {
         let origin = corner.insides[inside];
         match self {
@@ -709,8 +709,8 @@ impl EmitterPoints {
             EmitterPoints::BySolidAngle(views) => {
                 // The whole square: the border `stratified_uv` keeps off is no patch edge
                 // here, and left out it biased a sliver's integral by 0.3%.
-                let unit = |x: f64| ((x - 1e-3) / (1.0 - 2e-3)).clamp(0.0, 1.0);
-                let w = views[inside].direction(unit(u), unit(v));
+                let (u, v) = roberts_point(k, seed);
+                let w = views[inside].direction(u, v);
                 let on_plane = emitter.polygon.corners()[0] - origin;
                 let distance = on_plane.dot(emitter.normal) / w.dot(emitter.normal);
                 let weight = corner.normal.dot(w).max(0.0) * views[inside].solid_angle();
@@ -718,6 +718,7 @@ impl EmitterPoints {
             }
             // cos cos / r^2, the point-to-point kernel.
             EmitterPoints::ByArea => {
+                let (u, v) = stratified_uv(k, seed);
                 let target = emitter.polygon.point_at(u, v);
                 let d = target - origin;
                 let kernel = corner.normal.dot(d).max(0.0) * (-emitter.normal).dot(d).max(0.0)
