@@ -20,12 +20,16 @@ use crate::scene::Rgb;
 use crate::visibility::Occluders;
 use glam::DVec3;
 
-/// Cosine-distributed rays per corner. The gather's noise is the spread of what the rays see
-/// over the square root of this: at the vertices, the Cornell box at knob 0.3 read 4.80 /
-/// 3.77 / 3.00% smooth RMS with 16 / 32 / 64 (one bounce), and that noise is the floor of a
-/// hierarchy's error, near 1.6% there; the monastery at the reference probes themselves read
-/// the same with 64 and 512 (docs/BENCHMARKS.md).
-pub(super) const BOUNCE_RAYS: u32 = 64;
+/// Cosine-distributed rays of a gather point of the mean size: the area-weighted noise of the
+/// gather is what this many rays at every point would give ([`ray_counts`]). The gather's
+/// noise is the spread of what the rays see over the square root of the rays: at the vertices,
+/// the Cornell box at knob 0.3 read 4.80 / 3.77 / 3.00% smooth RMS with 16 / 32 / 64 (one
+/// bounce), and that noise is the floor of a hierarchy's error, near 1.6% there
+/// (docs/BENCHMARKS.md).
+pub(super) const MEAN_RAYS: f64 = 64.0;
+
+/// The fewest and the most rays one gather point casts ([`ray_counts`]).
+const RAYS_PER_POINT: (f64, f64) = (16.0, 256.0);
 
 /// What seeds the gather's rays, apart from the direct light's at the same corner.
 const BOUNCE_SEED: usize = 0xB0C3;
@@ -68,8 +72,11 @@ impl Landing {
     }
 }
 
-/// Per gather point, where its rays landed on faces that reflect light.
-struct Landings(PointRows<Landing>);
+/// Per gather point, where its rays landed on faces that reflect light, and how many it cast.
+struct Landings {
+    rows: PointRows<Landing>,
+    rays: Vec<u16>,
+}
 
 /// Where the bounce's rays landed from each mesh corner and from each patch's centroid. The
 /// centroids' gathers say what interpolating the corners' misses over each patch, as for the
@@ -83,8 +90,8 @@ pub(super) struct BounceLandings {
 
 impl BounceLandings {
     /// Casts the bounce's rays from `corners` (one per corner of `mesh`; `None`: a corner no
-    /// patch uses) and from `centroids` (one per patch), and records where they land, counting
-    /// the points done in `tally`.
+    /// patch uses) and from `centroids` (one per patch), as many from each as [`ray_counts`]
+    /// gives it, and records where they land, counting the points done in `tally`.
     pub(super) fn cast(
         mesh: &Mesh,
         (corners, centroids): (&[Option<GatherPoint>], &[Option<GatherPoint>]),
@@ -93,13 +100,31 @@ impl BounceLandings {
         tally: &Tally,
     ) -> BounceLandings {
         let locator = PatchLocator::new(mesh, face_count);
-        let cast = |points, first_index| {
-            Landings::cast(mesh, &locator, points, first_index, occluders, tally)
+        let represented = (corners.iter().zip(corner_areas(mesh)))
+            .chain(centroids.iter().zip(mesh.patches.iter().map(|p| p.area)))
+            .map(|(point, area)| point.as_ref().map(|_| area));
+        let mut rays = ray_counts(&represented.collect::<Vec<_>>());
+        let centre_rays = rays.split_off(corners.len());
+        let cast = |points, rays, first_index| {
+            Landings::cast(
+                mesh,
+                &locator,
+                (points, rays),
+                first_index,
+                occluders,
+                tally,
+            )
         };
         BounceLandings {
-            corners: cast(corners, 0),
-            centres: cast(centroids, corners.len()),
+            corners: cast(corners, rays, 0),
+            centres: cast(centroids, centre_rays, corners.len()),
         }
+    }
+
+    /// The rays corner `corner` cast.
+    #[cfg(test)]
+    pub(super) fn corner_rays(&self, corner: usize) -> u16 {
+        self.corners.rays[corner]
     }
 
     /// Per corner and per patch centroid, the mean over its rays of `reflected` (per corner
@@ -113,23 +138,23 @@ impl BounceLandings {
 }
 
 impl Landings {
-    /// Casts [`BOUNCE_RAYS`] from each of `points` (the first seeded as point
-    /// `first_index`) and records where they land. A ray that escapes, meets the back of a
+    /// Casts `rays` from each of `points` (the first seeded as point `first_index`) and
+    /// records where they land. A ray that escapes, meets the back of a
     /// face (from inside a wall it reads nothing), or a face that reflects nothing (a sky, at
     /// any edit), gathers nothing. Each point counts as done in `tally`.
     fn cast(
         mesh: &Mesh,
         locator: &PatchLocator,
-        points: &[Option<GatherPoint>],
+        (points, rays): (&[Option<GatherPoint>], Vec<u16>),
         first_index: usize,
         occluders: &Occluders,
         tally: &Tally,
     ) -> Landings {
-        Landings(PointRows::at_points(points, tally, |index, point| {
+        let rows = PointRows::at_points(points, tally, |index, point| {
             let seed = pair_seed(first_index + index, BOUNCE_SEED);
             let normal = snapped(point.normal);
             let mut landed = Vec::new();
-            for k in 0..BOUNCE_RAYS {
+            for k in 0..u32::from(rays[index]) {
                 let (u, v) = stratified_uv(k, seed);
                 let direction = cosine_direction(normal, u, v);
                 let origin = point.insides[k as usize % point.insides.len()];
@@ -149,17 +174,57 @@ impl Landings {
             }
             landed.shrink_to_fit();
             landed
-        }))
+        });
+        Landings { rows, rays }
     }
 
     /// Per point, the mean over its rays of `reflected` (per corner of `mesh`) where they
     /// land.
     fn read(&self, mesh: &Mesh, reflected: &[Rgb]) -> Vec<Rgb> {
-        self.0.map_rows(|row| {
-            let sum: Rgb = row.iter().map(|l| l.read(mesh, reflected)).sum();
-            sum / f64::from(BOUNCE_RAYS)
-        })
+        let sums = (self.rows).map_rows(|row| row.iter().map(|l| l.read(mesh, reflected)).sum());
+        (sums.into_iter().zip(&self.rays))
+            .map(|(sum, &rays)| sum / f64::from(rays.max(1)))
+            .collect()
     }
+}
+
+/// Per corner of `mesh`, the area it stands for in what viewers see: its share of each patch
+/// around it (a third of a triangle, a quarter of a quad).
+fn corner_areas(mesh: &Mesh) -> Vec<f64> {
+    let mut areas = vec![0.0; mesh.positions.len()];
+    for patch in &mesh.patches {
+        let corners = &patch.corners[..patch.corner_count()];
+        for &c in corners {
+            areas[c as usize] += patch.area / corners.len() as f64;
+        }
+    }
+    areas
+}
+
+/// Rays for each gather point of `represented` (the area it stands for; `None`: a point that
+/// casts none). A point's noise shows over its area, so what viewers see of it all is the
+/// area-weighted variance `sum A_i s^2 / N_i`; for a given total of rays it is least with
+/// `N_i` in proportion to `sqrt(A_i)` (Lagrange), scaled here so that it equals that of
+/// [`MEAN_RAYS`] at every point, then bounded by [`RAYS_PER_POINT`]. A refined model's points
+/// are mostly small (the leaves where the direct light changes): the monastery's 1.03M
+/// points cast 16 a point on average, the furnished room's 18, the teddy bear's 30
+/// (docs/BENCHMARKS.md).
+fn ray_counts(represented: &[Option<f64>]) -> Vec<u16> {
+    let (area, root_area) = (represented.iter().flatten())
+        .fold((0.0, 0.0), |(sum, roots), &a| (sum + a, roots + a.sqrt()));
+    let per_root_area = if area > 0.0 {
+        MEAN_RAYS * root_area / area
+    } else {
+        0.0
+    };
+    let (fewest, most) = RAYS_PER_POINT;
+    (represented.iter())
+        .map(|a| {
+            a.map_or(0, |a| {
+                (per_root_area * a.sqrt()).round().clamp(fewest, most) as u16
+            })
+        })
+        .collect()
 }
 
 /// `normal` with the components that are zero up to rounding made exactly zero: the frame the
@@ -173,4 +238,48 @@ fn snapped(normal: DVec3) -> DVec3 {
         DVec3::ZERO,
         normal,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{MEAN_RAYS, RAYS_PER_POINT, ray_counts};
+
+    #[test]
+    fn points_of_one_area_each_cast_the_mean_rays() {
+        assert_eq!(ray_counts(&[Some(0.3); 5]), vec![MEAN_RAYS as u16; 5]);
+    }
+
+    #[test]
+    fn rays_go_with_the_root_of_the_area_and_keep_the_mean_rays_noise() {
+        let areas = [1.0, 4.0, 0.25, 2.25];
+        let rays = ray_counts(&areas.map(Some));
+        // sum A = 7.5 and sum sqrt(A) = 5: 42.67 rays per unit root area.
+        assert_eq!(rays, vec![43, 85, 21, 64]);
+        // The area-weighted variance sum A / N, as with the mean rays at every point, from
+        // fewer rays in all.
+        let allocated: f64 = (areas.iter().zip(&rays))
+            .map(|(a, &n)| a / f64::from(n))
+            .sum();
+        let uniform = areas.iter().sum::<f64>() / MEAN_RAYS;
+        assert!(
+            (allocated / uniform - 1.0).abs() < 0.01,
+            "{allocated} against {uniform}"
+        );
+        let total: f64 = rays.iter().map(|&n| f64::from(n)).sum();
+        assert!(total < MEAN_RAYS * 4.0, "{total}");
+    }
+
+    #[test]
+    fn rays_stay_within_their_bounds_and_a_point_that_casts_none_gets_none() {
+        // A thousand points of 1e-4 and one of 1: 640 rays per unit root area, 6.4 for each
+        // small point and 640 for the large one, unbounded.
+        let mut represented = vec![Some(1e-4); 1000];
+        represented.extend([Some(1.0), None]);
+        let rays = ray_counts(&represented);
+        let (fewest, most) = RAYS_PER_POINT;
+        assert_eq!(
+            (rays[0], rays[1000], rays[1001]),
+            (fewest as u16, most as u16, 0)
+        );
+    }
 }

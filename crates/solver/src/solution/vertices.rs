@@ -33,15 +33,18 @@ use std::collections::BTreeSet;
 /// Shadow rays per corner and emitter: the first ones decide alone when they all agree, the
 /// rest sample a penumbra. An emitter that gives a corner less than [`MINOR_SHARE`] of its
 /// unoccluded direct light gets the minor budget: its visibility error weighs that much less
-/// (in the furnished room, 16 lamps a vertex mostly sees from afar).
+/// (in the furnished room, 16 lamps a vertex mostly sees from afar). Only corners in a
+/// penumbra cast the rest, so it costs little: with 128 and 32 instead of 64 and 16, the
+/// monastery read 5.80 / 5.93 / 5.57% smooth RMS instead of 6.49 / 6.58 / 5.92% over three
+/// seeds, in 47 s instead of 45 (docs/BENCHMARKS.md).
 const RAYS: RayBudget = RayBudget {
     first: 16,
-    penumbra: 64,
+    penumbra: 128,
 };
 /// The budget of an emitter that gives a corner little of its light.
 const MINOR_RAYS: RayBudget = RayBudget {
     first: 4,
-    penumbra: 16,
+    penumbra: 32,
 };
 /// Below this share of a corner's unoccluded direct light an emitter is minor.
 const MINOR_SHARE: f64 = 0.05;
@@ -1017,12 +1020,16 @@ mod tests {
         let got = bounce.read(&mesh, &reflected).0[corner].x;
         let expected = 4.0 * howell_b3(1.0, 1.0, 1.0);
         println!("gathered {got} against 4 x Howell B-3 {expected}");
-        // Independent cosine rays would be off by sqrt(F (1 - F) / rays), 3.5 rays' worth at
-        // one standard deviation; the stratified sequence lands within one ray.
-        let one_ray = 1.0 / super::super::bounce::BOUNCE_RAYS as f64;
+        // This corner, inside the floor, stands for more area than the mean gather point
+        // (corners on an edge stand for less) and casts more than 64 rays. Independent
+        // cosine rays would be off by sqrt(F (1 - F) rays), 4 rays' worth at one standard
+        // deviation with 71; the stratified sequence lands within two (measured: 1.3 with 71,
+        // under one with 64).
+        let rays = f64::from(bounce.corner_rays(corner));
+        assert!(rays > 64.0, "{rays} rays");
         assert!(
-            (got - expected).abs() <= one_ray,
-            "{got} against {expected}"
+            (got - expected).abs() <= 2.0 / rays,
+            "{got} against {expected} with {rays} rays"
         );
     }
 
