@@ -35,8 +35,8 @@ use std::collections::BTreeSet;
 /// unoccluded direct light gets the minor budget: its visibility error weighs that much less
 /// (in the furnished room, 16 lamps a vertex mostly sees from afar). Only corners in a
 /// penumbra cast the rest, so it costs little: with 128 and 32 instead of 64 and 16, the
-/// monastery read 5.80 / 5.93 / 5.57% smooth RMS instead of 6.49 / 6.58 / 5.92% over three
-/// seeds, in 47 s instead of 45 (docs/BENCHMARKS.md).
+/// monastery read 6.73 / 5.80 / 5.93 / 5.57% smooth RMS instead of 6.13 / 6.49 / 6.58 /
+/// 5.92% over four seeds of its gathers, in 47 s instead of 45 (docs/BENCHMARKS.md).
 const RAYS: RayBudget = RayBudget {
     first: 16,
     penumbra: 128,
