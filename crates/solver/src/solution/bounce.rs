@@ -106,14 +106,7 @@ impl BounceLandings {
         let mut rays = ray_counts(&represented.collect::<Vec<_>>());
         let centre_rays = rays.split_off(corners.len());
         let cast = |points, rays, first_index| {
-            Landings::cast(
-                mesh,
-                &locator,
-                (points, rays),
-                first_index,
-                occluders,
-                tally,
-            )
+            Landings::cast(mesh, &locator, points, rays, first_index, occluders, tally)
         };
         BounceLandings {
             corners: cast(corners, rays, 0),
@@ -145,7 +138,8 @@ impl Landings {
     fn cast(
         mesh: &Mesh,
         locator: &PatchLocator,
-        (points, rays): (&[Option<GatherPoint>], Vec<u16>),
+        points: &[Option<GatherPoint>],
+        rays: Vec<u16>,
         first_index: usize,
         occluders: &Occluders,
         tally: &Tally,
