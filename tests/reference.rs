@@ -224,6 +224,57 @@ fn the_error_is_split_by_object_and_the_wrong_one_holds_all_of_it() {
 }
 
 #[test]
+fn the_worst_probes_are_listed_worst_first_with_their_share_of_the_error() {
+    // A floor that reads 2 everywhere, and references of 2 but at two probes: 1 at the 7th
+    // (off by 1 on each channel) and 2.5 at the 20th (off by 0.5): they are the only ones
+    // listed, the 7th first with 1 / (1 + 0.25) of the squared error, where they lie.
+    let mut scene = solver::Scene::default();
+    let (x, z) = (dvec3(1.0, 0.0, 0.0), dvec3(0.0, 0.0, 1.0));
+    add_rect(
+        &mut scene,
+        "floor",
+        dvec3(0.0, 0.0, 0.0),
+        z,
+        x,
+        grey(0.5, 0.0),
+    );
+    let mesh = solver::Mesh::build(&scene, PatchTarget::Count(16));
+    let radiosity = vec![Rgb::splat(2.0); mesh.patches.len()];
+    let corners = vec![Rgb::splat(2.0); mesh.positions.len()];
+    let reference_at = |i: usize| match i {
+        7 => 1.0,
+        20 => 2.5,
+        _ => 2.0,
+    };
+    let probes: Vec<Probe> = (place_probes(&scene, 50, 3).into_iter().enumerate())
+        .map(|(i, (face, p))| Probe {
+            position: p.to_array(),
+            face: scene.faces[face as usize].source,
+            object: String::new(),
+            radiosity: [reference_at(i); 3],
+            standard_error: [0.0; 3],
+        })
+        .collect();
+    let error = evaluate(&scene, &mesh, &radiosity, &corners, &probes);
+    let listed: Vec<([f64; 3], [f64; 3], f64)> = (error.worst.iter())
+        .map(|w| (w.position, w.reference, w.smooth_share))
+        .collect();
+    let expected = vec![
+        (probes[7].position, [1.0; 3], 0.8),
+        (probes[20].position, [2.5; 3], 0.2),
+    ];
+    assert_eq!(listed.len(), 2, "{:?}", error.worst);
+    for (got, want) in listed.iter().zip(&expected) {
+        assert_eq!((got.0, got.1), (want.0, want.1));
+        assert!((got.2 - want.2).abs() < 1e-12, "{got:?} against {want:?}");
+    }
+    for w in &error.worst {
+        assert_eq!((w.face, w.object.as_str()), (0, "floor"));
+        assert_eq!((w.smooth, w.flat), ([2.0; 3], [2.0; 3]));
+    }
+}
+
+#[test]
 fn probes_go_only_where_the_error_is_measured_not_on_emitters() {
     // A sky nine times the floor's area: every probe still lands on the floor.
     let mut scene = solver::Scene::default();

@@ -10,6 +10,10 @@ use solver::visibility::Occluders;
 use solver::{SolveReport, solve_file};
 use std::path::PathBuf;
 
+/// The worst probes the summary prints (the JSON lists all of `SolutionError::worst`), each by
+/// its largest channel.
+const WORST_SHOWN: usize = 3;
+
 /// The arguments of `radcast solve`.
 #[derive(clap::Args)]
 pub struct SolveCommand {
@@ -105,6 +109,18 @@ impl SolveCommand {
                         o.flat.rms,
                         o.probes,
                         100.0 * o.smooth_share
+                    );
+                }
+                // The few places that hold most of the error on a real model, to look at.
+                for w in e.worst.iter().take(WORST_SHOWN) {
+                    let [x, y, z] = w.position;
+                    println!(
+                        "  worst at ({x:.3}, {y:.3}, {z:.3}), face {} of {}: shown {:.4}, reference {:.4}  ({:.0}% of the squared error)",
+                        w.face,
+                        w.object,
+                        w.smooth.into_iter().fold(0.0, f64::max),
+                        w.reference.into_iter().fold(0.0, f64::max),
+                        100.0 * w.smooth_share
                     );
                 }
             }

@@ -39,6 +39,32 @@ pub struct SolutionError {
     /// The same readings object by object (those with counted probes, in scene order): where
     /// the error is.
     pub objects: Vec<ObjectError>,
+    /// The probes whose smooth reading is furthest off, worst first, at most [`WORST_PROBES`]
+    /// (none that is exact): on real models a few places (a face half inside another, a
+    /// lit strip between covered corners) can hold most of the error, and this says where.
+    pub worst: Vec<ProbeError>,
+}
+
+/// How many probes a [`SolutionError`] lists as the worst.
+pub const WORST_PROBES: usize = 10;
+
+/// One probe where the smooth reading is off.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ProbeError {
+    /// Where it lies, scene units.
+    pub position: [f64; 3],
+    /// The scene file's face it lies on ([`Probe::face`]).
+    pub face: u32,
+    /// Its object's name.
+    pub object: String,
+    /// The reference's radiosity there, W/m^2.
+    pub reference: [f64; 3],
+    /// What viewers are shown there (the smooth reading), W/m^2.
+    pub smooth: [f64; 3],
+    /// The value of the patch holding it (the flat reading), W/m^2.
+    pub flat: [f64; 3],
+    /// Its part of the whole scene's squared smooth error.
+    pub smooth_share: f64,
 }
 
 /// One object's share of a solution's error.
@@ -135,6 +161,8 @@ pub(crate) struct Readings {
     pub(crate) variance: Vec<f64>,
     /// The object each probe lies on.
     pub(crate) objects: Vec<u32>,
+    /// Each probe's index among the probes read.
+    pub(crate) indices: Vec<usize>,
 }
 
 /// Measures a solution on `mesh` (built from `scene`) at the probes: `radiosity` per patch for
@@ -153,6 +181,7 @@ pub fn evaluate(
         smooth: stats(&readings.smooth),
         reference_noise: readings.noise(),
         objects: readings.by_object(scene),
+        worst: readings.worst(scene, probes),
     }
 }
 
@@ -171,6 +200,31 @@ impl Readings {
         } else {
             0.0
         }
+    }
+
+    /// The [`WORST_PROBES`] of `probes` (those read) whose smooth reading is furthest off,
+    /// worst first, leaving out those it reads exactly.
+    fn worst(&self, scene: &Scene, probes: &[Probe]) -> Vec<ProbeError> {
+        let total = squared_error(&self.smooth);
+        let off = |i: usize| (self.smooth[i].0 - self.smooth[i].1).length_squared();
+        let mut order: Vec<usize> = (0..self.smooth.len()).filter(|&i| off(i) > 0.0).collect();
+        order.sort_by(|&a, &b| off(b).total_cmp(&off(a)));
+        order.truncate(WORST_PROBES);
+        order
+            .into_iter()
+            .map(|i| {
+                let probe = &probes[self.indices[i]];
+                ProbeError {
+                    position: probe.position,
+                    face: probe.face,
+                    object: scene.objects[self.objects[i] as usize].name.clone(),
+                    reference: probe.radiosity,
+                    smooth: self.smooth[i].0.to_array(),
+                    flat: self.flat[i].0.to_array(),
+                    smooth_share: off(i) / total,
+                }
+            })
+            .collect()
     }
 
     /// The readings split by the object each probe lies on, in one pass over the probes.
@@ -212,10 +266,10 @@ pub(crate) fn read_at(
         source_emits[face.source as usize] = Some(face.emission != Rgb::ZERO);
         source_object[face.source as usize] = face.object;
     }
-    let counted: Vec<&Probe> = probes
-        .iter()
-        .filter(|p| source_emits.get(p.face as usize) == Some(&Some(false)))
+    let indices: Vec<usize> = (0..probes.len())
+        .filter(|&i| source_emits.get(probes[i].face as usize) == Some(&Some(false)))
         .collect();
+    let counted: Vec<&Probe> = indices.iter().map(|&i| &probes[i]).collect();
     let (mut flat, mut smooth) = (Vec::new(), Vec::new());
     for probe in &counted {
         let reference = Rgb::from(probe.radiosity);
@@ -234,5 +288,6 @@ pub(crate) fn read_at(
             .iter()
             .map(|p| source_object[p.face as usize])
             .collect(),
+        indices,
     }
 }
