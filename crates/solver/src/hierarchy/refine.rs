@@ -2,7 +2,10 @@
 //! reduces its error most (BF refinement with visibility), until every kept link carries at
 //! most the tolerance; and the leaf budget that bounds how far it may go.
 
-use super::factor::{Estimate, LinkFactors, Rays, kernel_centre, tangent_coordinates};
+use super::factor::{
+    CLUSTER_SAMPLING, Estimate, KEPT_PAST_BUDGET, LinkFactors, Rays, kernel_centre,
+    tangent_coordinates,
+};
 use super::shaft::Visibility;
 use super::tree::{ELEMENT_CHILDREN, MAX_DEPTH, Node};
 use super::{Hierarchy, Link, Pair};
@@ -311,7 +314,12 @@ impl Decider<'_> {
         // A quarter of the link's error budget for its factor's quadrature: `rho_R B_S dF`.
         let (radiosity, _) = self.sources.at(source);
         let allowed = QUADRATURE_SHARE * self.target.tolerance / (r.reflectance * radiosity);
-        let factor = self.factors.factor(receiver, source, &estimate, allowed);
+        // Past the link budget a pair is only kept or dropped: its factor sampled coarsely.
+        let sampling = match self.target.tolerance.is_finite() {
+            true => CLUSTER_SAMPLING,
+            false => KEPT_PAST_BUDGET,
+        };
+        let factor = (self.factors).factor(receiver, source, &estimate, (allowed, sampling));
         if factor <= 0.0 {
             return Decision::Drop;
         }
