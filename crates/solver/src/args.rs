@@ -5,6 +5,7 @@
 use crate::hierarchy::{HierarchySettings, HierarchyStats};
 use crate::mesh::PatchTarget;
 use crate::pair::{FormFactorSettings, MAX_RAYS_PER_PAIR};
+use crate::sampling::Seed;
 use crate::solution::request::{DEFAULT_PATCHES, MethodChoice, SolveRequest, Target};
 use crate::solve::SolverSettings;
 
@@ -128,6 +129,10 @@ pub struct SolverArgs {
     /// Shadow rays per far patch pair (near pairs get more).
     #[arg(long, env = "RADCAST_RAYS", default_value_t = FormFactorSettings::default().rays_per_pair)]
     pub rays: u32,
+    /// Sample patterns of the gathers at corners and centroids: another seed shows the spread
+    /// their sampling leaves in the answer.
+    #[arg(long, env = "RADCAST_SEED", default_value_t = 0)]
+    pub seed: u64,
 }
 
 /// The hierarchical method's flags.
@@ -243,6 +248,7 @@ impl SolverArgs {
                 relaxation: self.omega,
                 ..SolverSettings::default()
             },
+            seed: Seed(self.seed),
             ..SolveRequest::default()
         };
         Ok(request.with_method(self.method, hierarchy))

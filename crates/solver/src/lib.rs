@@ -41,6 +41,7 @@ pub use input::{
 };
 pub use mesh::{Mesh, Patch, PatchTarget};
 pub use pair::FormFactorSettings;
+pub use sampling::Seed;
 pub use scene::motion::{Motion, Rotation};
 pub use scene::texture::{Texture, TextureMap};
 pub use scene::{

@@ -15,7 +15,7 @@
 use super::gather_point::{GatherPoint, PointRows, Tally};
 use super::locator::{PatchLocator, fan_corners};
 use crate::mesh::Mesh;
-use crate::sampling::{cosine_direction, pair_seed, stratified_uv};
+use crate::sampling::{Seed, cosine_direction, stratified_uv};
 use crate::scene::Rgb;
 use crate::visibility::Occluders;
 use glam::DVec3;
@@ -91,12 +91,13 @@ pub(super) struct BounceLandings {
 impl BounceLandings {
     /// Casts the bounce's rays from `corners` (one per corner of `mesh`; `None`: a corner no
     /// patch uses) and from `centroids` (one per patch), as many from each as [`ray_counts`]
-    /// gives it, and records where they land, counting the points done in `tally`.
+    /// gives it, in the patterns `seed` draws, and records where they land, counting the
+    /// points done in `tally`.
     pub(super) fn cast(
         mesh: &Mesh,
         (corners, centroids): (&[Option<GatherPoint>], &[Option<GatherPoint>]),
         occluders: &Occluders,
-        face_count: usize,
+        (face_count, seed): (usize, Seed),
         tally: &Tally,
     ) -> BounceLandings {
         let locator = PatchLocator::new(mesh, face_count);
@@ -105,8 +106,9 @@ impl BounceLandings {
             .map(|(point, area)| point.as_ref().map(|_| area));
         let mut rays = ray_counts(&represented.collect::<Vec<_>>());
         let centre_rays = rays.split_off(corners.len());
-        let cast = |points, rays, first_index| {
-            Landings::cast(mesh, &locator, points, rays, first_index, occluders, tally)
+        let cast = |points, rays, first_index: usize| {
+            let pattern = |index: usize| seed.pair(first_index + index, BOUNCE_SEED);
+            Landings::cast(mesh, &locator, points, rays, &pattern, occluders, tally)
         };
         BounceLandings {
             corners: cast(corners, rays, 0),
@@ -131,7 +133,7 @@ impl BounceLandings {
 }
 
 impl Landings {
-    /// Casts `rays` from each of `points` (the first seeded as point `first_index`) and
+    /// Casts `rays` from each of `points` (the `index`-th in the pattern `pattern(index)`) and
     /// records where they land. A ray that escapes, meets the back of a
     /// face (from inside a wall it reads nothing), or a face that reflects nothing (a sky, at
     /// any edit), gathers nothing. Each point counts as done in `tally`.
@@ -140,12 +142,12 @@ impl Landings {
         locator: &PatchLocator,
         points: &[Option<GatherPoint>],
         rays: Vec<u16>,
-        first_index: usize,
+        pattern: &(dyn Fn(usize) -> u64 + Sync),
         occluders: &Occluders,
         tally: &Tally,
     ) -> Landings {
         let rows = PointRows::at_points(points, tally, |index, point| {
-            let seed = pair_seed(first_index + index, BOUNCE_SEED);
+            let seed = pattern(index);
             let normal = snapped(point.normal);
             let mut landed = Vec::new();
             for k in 0..u32::from(rays[index]) {

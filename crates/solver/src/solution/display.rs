@@ -15,6 +15,7 @@ use super::vertices::{CornerIndirect, CornerLight};
 use crate::Progress;
 use crate::hierarchy::{Hierarchy, HierarchySettings, finest_radius};
 use crate::mesh::Mesh;
+use crate::sampling::Seed;
 use crate::scene::{Rgb, Scene};
 use crate::visibility::Occluders;
 use std::collections::BTreeSet;
@@ -65,7 +66,7 @@ pub(super) fn split_where_direct_light_curves(
     radiosity: Vec<Rgb>,
     scene: &Scene,
     occluders: &Occluders,
-    settings: &HierarchySettings,
+    (settings, seed): (&HierarchySettings, Seed),
     lights: &BTreeSet<u32>,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Displayed {
@@ -73,7 +74,7 @@ pub(super) fn split_where_direct_light_curves(
     let display_finest = finest * DISPLAY_FINEST_SHARE;
     let mesh = hierarchy.leaf_mesh();
     let averaged = CornerIndirect::Averaged;
-    let light = CornerLight::new(scene, &mesh, occluders, lights, averaged, progress);
+    let light = CornerLight::new(scene, &mesh, occluders, lights, averaged, seed, progress);
     let misfit = light.direct_misfit(&mesh, &hierarchy.leaf_emission());
     let tolerance = MISFIT_TOLERANCE * hierarchy.mean_reflected(&radiosity);
     let mut worst: Vec<(f64, usize)> = (0..mesh.patches.len())
@@ -113,6 +114,7 @@ mod tests {
     use crate::hierarchy::{Hierarchy, HierarchySettings};
     use crate::mesh::Mesh;
     use crate::pair::FormFactorSettings;
+    use crate::sampling::Seed;
     use crate::scene::{Material, Rgb, Scene};
     use crate::solution::vertices::{CornerIndirect, CornerLight};
     use crate::solve::SolverSettings;
@@ -169,14 +171,23 @@ mod tests {
         let (links, lights) = (hierarchy.stats().links, BTreeSet::from([1]));
         let mesh = hierarchy.leaf_mesh();
         let gathered = CornerIndirect::Gathered;
-        let light = CornerLight::new(scene, &mesh, &occluders, &lights, gathered, &no_progress);
+        let seed = Seed::default();
+        let light = CornerLight::new(
+            scene,
+            &mesh,
+            &occluders,
+            &lights,
+            gathered,
+            seed,
+            &no_progress,
+        );
         let unsplit = floor_error(scene, &hierarchy, &mesh, &radiosity, &light);
         let split = split_where_direct_light_curves(
             &mut hierarchy,
             radiosity,
             scene,
             &occluders,
-            &settings,
+            (&settings, seed),
             &lights,
             &no_progress,
         );

@@ -58,6 +58,9 @@ pub struct SolveReport {
     /// What cast every ray: `embree` where Intel Embree 3 was installed at build time, else
     /// `obvhs-cwbvh` (`crates/solver/build.rs`).
     pub ray_backend: &'static str,
+    /// The seed of the gathers' sample patterns (`--seed`): with the scene and the other
+    /// settings, what reproduces this answer.
+    pub seed: u64,
     /// Seconds per stage.
     pub seconds: StageSeconds,
     /// Per object, in scene order.

@@ -5,6 +5,7 @@ use crate::hierarchy::HierarchySettings;
 use crate::input::SceneError;
 use crate::mesh::{Mesh, PatchTarget};
 use crate::pair::FormFactorSettings;
+use crate::sampling::Seed;
 use crate::scene::Scene;
 use crate::solve::{Method, NeedsEntries, SolverSettings};
 
@@ -28,6 +29,9 @@ pub struct SolveRequest {
     /// Refine until the self-check says the answer is within this ([`super::target`]); then
     /// `hierarchy.error` is the finest knob and `patches` the coarsest mesh.
     pub target: Option<Target>,
+    /// The sample patterns of the gathers at the patches' corners and centroids (the direct
+    /// light's shadow rays, the bounce's rays, the test for a buried point).
+    pub seed: Seed,
 }
 
 /// What `--target-error` asks.
@@ -64,6 +68,7 @@ impl Default for SolveRequest {
             hierarchy: None,
             auto: false,
             target: None,
+            seed: Seed::default(),
         }
     }
 }

@@ -179,7 +179,9 @@ impl Session {
             DenseFormFactors::compute(mesh, &occluders, &request.form_factors, progress);
         let lights = lit_objects(scene);
         let averaged = CornerIndirect::Averaged;
-        let corner_light = CornerLight::new(scene, mesh, &occluders, &lights, averaged, progress);
+        let seed = request.seed;
+        let corner_light =
+            CornerLight::new(scene, mesh, &occluders, &lights, averaged, seed, progress);
         seconds.form_factors = clock.elapsed().as_secs_f64();
         Ok(Session::assemble(
             scene.clone(),
@@ -319,7 +321,7 @@ impl Session {
             radiosity,
             &scene,
             occluders,
-            &request.hierarchy.unwrap_or_default(),
+            (&request.hierarchy.unwrap_or_default(), request.seed),
             &lit_objects(&scene),
             progress,
         );
@@ -481,6 +483,7 @@ impl Session {
                     &occluders,
                     lights,
                     averaged,
+                    self.request.seed,
                     &no_progress,
                 );
                 Ok(MoveReport {
@@ -820,6 +823,7 @@ impl Session {
             converged,
             tolerance: self.request.solver.tolerance,
             ray_backend: crate::visibility::RayBackend::DEFAULT.name(),
+            seed: self.request.seed.0,
             rays: match &self.factors {
                 Factors::Dense(factors) => factors.rays_cast,
                 Factors::Hierarchy(hierarchy) => hierarchy.stats().rays,

@@ -22,7 +22,7 @@ use super::gather_point::{GatherPoint, GatheredAt, PointWeights, Tally, inset};
 use crate::Progress;
 use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
 use crate::mesh::{Mesh, Patch};
-use crate::sampling::{SphericalPolygon, pair_seed, roberts_point, stratified_uv};
+use crate::sampling::{Seed, SphericalPolygon, roberts_point, stratified_uv};
 use crate::scene::{Rgb, Scene};
 use crate::transport::Transport;
 use crate::visibility::Occluders;
@@ -137,22 +137,26 @@ pub struct CornerLight {
     /// [`INSET`](super::gather_point::INSET) of the way in from that corner (not under a box
     /// standing on the floor: [`Occluders::is_buried`]).
     reached: Vec<[bool; 4]>,
+    /// The sample patterns its rays draw.
+    seed: Seed,
 }
 
 impl CornerLight {
     /// Gathers the emitters of `scene` at the corners of `mesh` (built from it): the faces
     /// that emit, and every face of the objects in `lights` (a light turned off keeps its
     /// place, so that turning it on again finds its direct light gathered), with their
-    /// `indirect` light; each pass of rays reports its `progress`.
+    /// `indirect` light, in the sample patterns `seed` draws; each pass of rays reports its
+    /// `progress`.
     pub fn new(
         scene: &Scene,
         mesh: &Mesh,
         occluders: &Occluders,
         lights: &BTreeSet<u32>,
         indirect: CornerIndirect,
+        seed: Seed,
         progress: &(dyn Fn(Progress) + Sync),
     ) -> CornerLight {
-        let mut light = CornerLight::ungathered(mesh, occluders, indirect);
+        let mut light = CornerLight::ungathered(mesh, occluders, indirect, seed);
         light.gather_lights(scene, mesh, occluders, lights, progress);
         light
     }
@@ -174,13 +178,19 @@ impl CornerLight {
             corners: GatheredAt::new(&GatherPoint::corners_of(before), self.corners),
             centres: GatheredAt::new(&GatherPoint::centroids_of(before), self.centres),
         });
-        let mut light = CornerLight::ungathered(mesh, occluders, CornerIndirect::Gathered);
+        let gathered = CornerIndirect::Gathered;
+        let mut light = CornerLight::ungathered(mesh, occluders, gathered, self.seed);
         light.gather(scene, mesh, occluders, lights, earlier, progress);
         light
     }
 
     /// Nothing gathered yet at the corners of `mesh`, but which patches light reaches there.
-    fn ungathered(mesh: &Mesh, occluders: &Occluders, indirect: CornerIndirect) -> CornerLight {
+    fn ungathered(
+        mesh: &Mesh,
+        occluders: &Occluders,
+        indirect: CornerIndirect,
+        seed: Seed,
+    ) -> CornerLight {
         let reached = mesh
             .patches
             .par_iter()
@@ -189,8 +199,8 @@ impl CornerLight {
                 let mut reached = [true; 4];
                 for (slot, &c) in patch.corners[..patch.corner_count()].iter().enumerate() {
                     let inside = inset(mesh.positions[c as usize], patch.centroid);
-                    let seed = pair_seed(i, slot);
-                    reached[slot] = !occluders.is_buried(inside, patch.normal, patch.face, seed);
+                    let pattern = seed.pair(i, slot);
+                    reached[slot] = !occluders.is_buried(inside, patch.normal, patch.face, pattern);
                 }
                 reached
             })
@@ -202,6 +212,7 @@ impl CornerLight {
             indirect,
             bounce: None,
             reached,
+            seed,
         }
     }
 
@@ -255,10 +266,10 @@ impl CornerLight {
         // Per point, the emitting faces it sees and its form factor to each, visibility
         // included; the centroids' rays are seeded apart from the corners'.
         let tally = Tally::over(mesh, "direct light", progress);
-        let seen = |earlier: Option<&GatheredAt<(u32, f32)>>, point: &GatherPoint, seed| {
+        let seen = |earlier: Option<&GatheredAt<(u32, f32)>>, point: &GatherPoint, index| {
             let row = earlier.and_then(|gathered| gathered.at(point));
             row.map_or_else(
-                || seen_factors(point, &emitters, occluders, seed),
+                || seen_factors(point, &emitters, occluders, (self.seed, index)),
                 <[_]>::to_vec,
             )
         };
@@ -317,6 +328,7 @@ impl CornerLight {
         }
         let tally = Tally::over(mesh, "bounce rays", progress);
         let (faces, points) = (scene.faces.len(), (&corners[..], centroids));
+        let faces = (faces, self.seed);
         self.bounce = Some(BounceLandings::cast(mesh, points, occluders, faces, &tally));
     }
 
@@ -584,12 +596,13 @@ fn interpolation_weights(mesh: &Mesh, ids: &[u32]) -> [f64; 4] {
 }
 
 /// The emitters `point` sees, each with its form factor times the share visibility lets
-/// through; emitters that give it little light get the minor ray budget.
+/// through; emitters that give it little light get the minor ray budget. Its rays draw the
+/// patterns `seed` gives the point's `index` among the gather's points.
 fn seen_factors(
     point: &GatherPoint,
     emitters: &[Emitter],
     occluders: &Occluders,
-    index: usize,
+    (seed, index): (Seed, usize),
 ) -> Vec<(u32, f32)> {
     let unoccluded: Vec<f64> = emitters
         .iter()
@@ -610,7 +623,8 @@ fn seen_factors(
             } else {
                 &RAYS
             };
-            let factor = f * seen_share(point, e, occluders, index, budget);
+            let pattern = seed.pair(index, e.face as usize);
+            let factor = f * seen_share(point, e, occluders, pattern, budget);
             (factor > 0.0).then_some((e.face, factor as f32))
         })
         .collect()
@@ -635,15 +649,14 @@ fn unoccluded_factor(corner: &GatherPoint, emitter: &Emitter) -> f64 {
 /// drawn by solid angle where the emitter covers at least [`MIN_SOLID_ANGLE`] from each of
 /// them, so each weighs only its cosine at the corner and the rays go where the light comes
 /// from (ground under an eave and a 600 m sky: RMS 9.4% -> 4.8% with the same rays); by area
-/// on smaller emitters.
+/// on smaller emitters. `seed` picks the points' pattern.
 fn seen_share(
     corner: &GatherPoint,
     emitter: &Emitter,
     occluders: &Occluders,
-    index: usize,
+    seed: u64,
     budget: &RayBudget,
 ) -> f64 {
-    let seed = pair_seed(index, emitter.face as usize);
     let drawn = EmitterPoints::for_corner(corner, emitter);
     let (mut seen, mut total) = (0.0, 0.0);
     let mut sample = |k: u32| {
@@ -749,6 +762,7 @@ mod tests {
         room_with_a_box,
     };
     use crate::mesh::Mesh;
+    use crate::sampling::Seed;
     use crate::scene::{Material, Rgb, Scene};
     use crate::solution::gather_point::GatherPoint;
     use crate::visibility::Occluders;
@@ -834,6 +848,7 @@ mod tests {
                 &Occluders::new(&scene),
                 &std::collections::BTreeSet::new(),
                 super::CornerIndirect::Averaged,
+                Seed::default(),
                 &no_progress,
             );
             let face_emission = [Rgb::ZERO, Rgb::splat(10.0)];
@@ -847,7 +862,7 @@ mod tests {
     }
 
     #[test]
-    fn a_point_under_an_eave_sees_the_sky_around_it() {
+    fn a_point_under_an_eave_sees_the_sky_around_it_under_any_seed() {
         // A sky 600 m square 90 m up and an eave 10 x 7.5 m at 3 m, wholly inside the sky's
         // view from 225 points of the ground from under the eave to the open: the sky a
         // point sees is Lambert's factor to the sky less that to the eave. Drawn by area, most
@@ -886,25 +901,51 @@ mod tests {
             face: 2,
             brightness: 1.0,
         }];
-        let (mut squared, mut signed, mut n) = (0.0, 0.0, 0.0);
-        for i in 0..15 * 15 {
-            let at = dvec3(-7.0 + (i % 15) as f64, 0.0, -3.0 + (i / 15) as f64);
-            let point = GatherPoint {
-                limit: at,
-                normal: DVec3::Y,
-                face: 0,
-                insides: vec![at],
-            };
-            let seen = seen_factors(&point, &emitters, &occluders, i);
-            let got = seen.first().map_or(0.0, |&(_, f)| f64::from(f));
-            let exact = point_to_polygon_form_factor(at, DVec3::Y, &face(2), face(2).normal())
-                - point_to_polygon_form_factor(at, DVec3::Y, &face(1), face(1).normal());
-            let error = (got - exact) / exact;
-            (squared, signed, n) = (squared + error * error, signed + error, n + 1.0);
+        let points: Vec<GatherPoint> = (0..15 * 15)
+            .map(|i| {
+                let at = dvec3(-7.0 + (i % 15) as f64, 0.0, -3.0 + (i / 15) as f64);
+                GatherPoint {
+                    limit: at,
+                    normal: DVec3::Y,
+                    face: 0,
+                    insides: vec![at],
+                }
+            })
+            .collect();
+        let gather = |seed: Seed| -> Vec<f64> {
+            (points.iter().enumerate())
+                .map(|(i, point)| {
+                    let seen = seen_factors(point, &emitters, &occluders, (seed, i));
+                    seen.first().map_or(0.0, |&(_, f)| f64::from(f))
+                })
+                .collect()
+        };
+        let exact: Vec<f64> = (points.iter())
+            .map(|p| {
+                let at = p.limit;
+                point_to_polygon_form_factor(at, DVec3::Y, &face(2), face(2).normal())
+                    - point_to_polygon_form_factor(at, DVec3::Y, &face(1), face(1).normal())
+            })
+            .collect();
+        // Any seed draws an unbiased pattern of its own, and the same seed draws it again.
+        let default = gather(Seed::default());
+        assert_eq!(gather(Seed::default()), default);
+        for seed in [Seed::default(), Seed(1), Seed(2)] {
+            let got = gather(seed);
+            let errors: Vec<f64> = (got.iter().zip(&exact)).map(|(g, e)| (g - e) / e).collect();
+            let n = errors.len() as f64;
+            let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
+            let bias = errors.iter().sum::<f64>() / n;
+            println!("{seed:?}: RMS {rms}, bias {bias}");
+            assert!(
+                rms < 0.06 && bias.abs() < 0.01,
+                "{seed:?}: RMS {rms}, bias {bias}"
+            );
+            if seed != Seed::default() {
+                let moved = (got.iter().zip(&default)).filter(|(g, d)| g != d).count();
+                assert!(moved > points.len() / 2, "{seed:?} moved {moved} points");
+            }
         }
-        let (rms, bias) = ((squared / n).sqrt(), signed / n);
-        println!("RMS {rms}, bias {bias}");
-        assert!(rms < 0.06 && bias.abs() < 0.01, "RMS {rms}, bias {bias}");
     }
 
     /// A grey 2 x 2 floor (face 0) meshed at 0.5 under an equal grey plate facing down 1
@@ -926,7 +967,8 @@ mod tests {
         let occluders = Occluders::new(&scene);
         let gathered = super::CornerIndirect::Gathered;
         let lights = BTreeSet::new();
-        let light = CornerLight::new(&scene, &mesh, &occluders, &lights, gathered, progress);
+        let seed = Seed::default();
+        let light = CornerLight::new(&scene, &mesh, &occluders, &lights, gathered, seed, progress);
         let mut reflected = vec![Rgb::ZERO; mesh.positions.len()];
         for patch in mesh.patches.iter().filter(|p| p.face == 1) {
             for &c in &patch.corners[..patch.corner_count()] {
@@ -972,7 +1014,16 @@ mod tests {
         let lights = BTreeSet::new();
         let before = hierarchy.leaf_mesh();
         let averaged = super::CornerIndirect::Averaged;
-        let light = CornerLight::new(&scene, &before, &occluders, &lights, averaged, &no_progress);
+        let seed = Seed::default();
+        let light = CornerLight::new(
+            &scene,
+            &before,
+            &occluders,
+            &lights,
+            averaged,
+            seed,
+            &no_progress,
+        );
         let face_emission: Vec<Rgb> = scene.faces.iter().map(|f| f.emission).collect();
         let read = |light: &CornerLight, mesh: &Mesh| {
             let corners = GatherPoint::corners_of(mesh).into_iter();
