@@ -22,8 +22,8 @@ pub fn pair_seed(a: usize, b: usize) -> u64 {
 
 /// Which sample patterns the gathers at a solution's points draw: 0 is the default's, and any
 /// other seed gives patterns independent of it, so that solving again under a few seeds shows
-/// the spread sampling leaves in an answer (on the 125k-triangle monastery, 5.4-6.6% smooth RMS
-/// over five seeds: docs/BENCHMARKS.md).
+/// the spread sampling leaves in an answer (the 125k-triangle monastery read 6.25-6.73% smooth
+/// RMS over seeds 0-4 on one hierarchy: docs/BENCHMARKS.md).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Seed(pub u64);
 
