@@ -57,6 +57,10 @@ pub struct SolveReport {
     /// What cast them: `embree` or `obvhs-cwbvh` (empty from a server that did not say).
     #[serde(default)]
     pub ray_backend: String,
+    /// The seed of the gathers' sample patterns the solve drew (0, the default, from a server
+    /// that did not say).
+    #[serde(default)]
+    pub seed: u64,
     /// Wall-clock seconds per stage.
     pub seconds: StageSeconds,
     /// Per object of the scene, in file order.

@@ -147,6 +147,7 @@ pub fn report_for_viewers(report: &solver::SolveReport) -> SolveReport {
         tolerance: report.tolerance,
         rays: report.rays,
         ray_backend: report.ray_backend.into(),
+        seed: report.seed,
         seconds: StageSeconds {
             load: s.load,
             mesh: s.mesh,
