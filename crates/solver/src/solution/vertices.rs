@@ -327,8 +327,7 @@ impl CornerLight {
             }
         }
         let tally = Tally::over(mesh, "bounce rays", progress);
-        let (faces, points) = (scene.faces.len(), (&corners[..], centroids));
-        let faces = (faces, self.seed);
+        let (faces, points) = ((scene.faces.len(), self.seed), (&corners[..], centroids));
         self.bounce = Some(BounceLandings::cast(mesh, points, occluders, faces, &tally));
     }
 
