@@ -84,7 +84,8 @@ pub struct TargetReport {
     /// Whether the last step's upper bound reached it.
     pub reached: bool,
     /// Why refinement stopped: `reached`, `time limit`, `finest knob` (the `--error` floor),
-    /// `budget` (leaves or links) or `matrix limit` (a finer dense mesh does not fit).
+    /// `budget` (leaves or links, or a step that added under 1% more leaves) or `matrix limit`
+    /// (a finer dense mesh does not fit).
     pub stopped: &'static str,
     /// Each solve and its check, coarsest first.
     pub steps: Vec<TargetStep>,
