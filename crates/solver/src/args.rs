@@ -35,10 +35,10 @@ pub struct CheckArgs {
     pub check: Check,
     /// Refine until the self-check's upper bound on the smooth RMS error is at most this
     /// (0.05 for 5%): a hierarchy from a coarse knob (0.4), halved each step down to --error,
-    /// refined from where it is, until a step adds under 1% more leaves; a dense mesh solved again at twice --patches each step. Says
-    /// where it stopped and why (`target` in the JSON). The default, 0.05, holds while the
-    /// check is on and no --patches, --patch-size or --error fixes the resolution; `off`
-    /// solves once at the resolution asked.
+    /// refined from where it is, until a step adds under 1% more leaves; a dense mesh solved
+    /// again at twice --patches each step. Says where it stopped and why (`target` in the
+    /// JSON). The default, 0.05, holds while the check is on and no --patches, --patch-size
+    /// or --error fixes the resolution; `off` solves once at the resolution asked.
     #[arg(long, env = "RADCAST_TARGET_ERROR", value_parser = parse_target_error)]
     pub target_error: Option<TargetError>,
     /// Seconds a solve to a target may take, about (a step is not started when the time spent

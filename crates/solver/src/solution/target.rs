@@ -21,7 +21,7 @@ pub const STARTING_KNOB: f64 = 0.4;
 /// back to the last one's) and a further step solves and gathers the same mesh again. The
 /// furnished room's third step added 0.3% (269,989 -> 270,829 leaves, knob 0.8 each time) and
 /// read 3.01% against 2.97%, its fourth 3.15%, 26 s each (docs/BENCHMARKS.md).
-const MIN_LEAF_GROWTH: f64 = 0.01;
+const MIN_LEAF_GROWTH_PERCENT: usize = 1;
 
 /// Solves toward `target` from the coarsest step, for a caller that keeps the session (the
 /// server; [`super::pipeline::solve_scene`] for one that does not): `request` has its
@@ -191,13 +191,11 @@ impl Run<'_> {
     }
 }
 
-/// Whether the last of `steps` has fewer than [`MIN_LEAF_GROWTH`] more leaves than the one
-/// before it.
+/// Whether the last of `steps` has fewer than [`MIN_LEAF_GROWTH_PERCENT`] more leaves than
+/// the one before it (counted in integers: the bound itself is exact).
 fn added_little(steps: &[TargetStep]) -> bool {
     match steps {
-        [.., before, last] => {
-            (last.patches as f64) < before.patches as f64 * (1.0 + MIN_LEAF_GROWTH)
-        }
+        [.., before, last] => last.patches * 100 < before.patches * (100 + MIN_LEAF_GROWTH_PERCENT),
         _ => false,
     }
 }
