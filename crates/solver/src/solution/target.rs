@@ -191,8 +191,8 @@ impl Run<'_> {
     }
 }
 
-/// Whether the last of `steps` has fewer than [`MIN_LEAF_GROWTH_PERCENT`] more leaves than
-/// the one before it (counted in integers: the bound itself is exact).
+/// Whether the last of `steps` has less than [`MIN_LEAF_GROWTH_PERCENT`] per cent more leaves
+/// than the one before it (counted in integers: the bound itself is exact).
 fn added_little(steps: &[TargetStep]) -> bool {
     match steps {
         [.., before, last] => last.patches * 100 < before.patches * (100 + MIN_LEAF_GROWTH_PERCENT),
