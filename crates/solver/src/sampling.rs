@@ -134,13 +134,18 @@ impl SphericalPolygon {
     }
 }
 
-/// A spherical triangle: its vertices' unit directions and its angle at the first.
+/// A spherical triangle: its vertices' unit directions, and what Arvo's map needs of it that
+/// does not depend on the direction drawn (a corner in a penumbra draws up to 128 from one).
 #[derive(Clone, Copy, Debug)]
 struct SphericalTriangle {
     a: DVec3,
     b: DVec3,
-    c: DVec3,
-    alpha: f64,
+    /// The unit vector from `a` toward `c`, perpendicular to `a`.
+    c_across_a: DVec3,
+    /// The sine and cosine of its angle at `a`.
+    sin_alpha: f64,
+    cos_alpha: f64,
+    cos_ab: f64,
     /// The sum of its three angles: its solid angle plus pi.
     angle_sum: f64,
 }
@@ -154,11 +159,14 @@ impl SphericalTriangle {
         );
         let alpha = angle_between(n_ab, -n_ca);
         let angle_sum = alpha + angle_between(n_bc, -n_ab) + angle_between(n_ca, -n_bc);
+        let (sin_alpha, cos_alpha) = alpha.sin_cos();
         (angle_sum > PI).then_some(SphericalTriangle {
             a,
             b,
-            c,
-            alpha,
+            c_across_a: across(c, a),
+            sin_alpha,
+            cos_alpha,
+            cos_ab: a.dot(b),
             angle_sum,
         })
     }
@@ -170,17 +178,16 @@ impl SphericalTriangle {
     /// Arvo's map: `u` sets the sub-triangle's area, which fixes the point `c'` on the arc
     /// from `a` to `c`; `v` picks the point on the arc from `b` to `c'`.
     fn direction(&self, u: f64, v: f64) -> DVec3 {
-        let (sin_alpha, cos_alpha) = self.alpha.sin_cos();
+        let (sin_alpha, cos_alpha) = (self.sin_alpha, self.cos_alpha);
         let (sin_area, cos_area) = (PI + u * (self.angle_sum - PI)).sin_cos();
         let sin_phi = sin_area * cos_alpha - cos_area * sin_alpha;
         let cos_phi = cos_area * cos_alpha + sin_area * sin_alpha;
         let k1 = cos_phi + cos_alpha;
-        let k2 = sin_phi - sin_alpha * self.a.dot(self.b);
+        let k2 = sin_phi - sin_alpha * self.cos_ab;
         let cos_b = ((k2 + (k2 * cos_phi - k1 * sin_phi) * cos_alpha)
             / ((k2 * sin_phi + k1 * cos_phi) * sin_alpha))
             .clamp(-1.0, 1.0);
-        let c_prime =
-            self.a * cos_b + across(self.c, self.a) * (1.0 - cos_b * cos_b).max(0.0).sqrt();
+        let c_prime = self.a * cos_b + self.c_across_a * (1.0 - cos_b * cos_b).max(0.0).sqrt();
         let cos_theta = 1.0 - v * (1.0 - c_prime.dot(self.b));
         let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
         (self.b * cos_theta + across(c_prime, self.b) * sin_theta).normalize()
