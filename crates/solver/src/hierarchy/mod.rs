@@ -4,7 +4,8 @@
 //!
 //! - **Elements** (Hanrahan, Salzman, Aupperle 1991, "A Rapid Hierarchical Radiosity
 //!   Algorithm"): each input face roots a quadtree (a quad into four quads, a triangle into four
-//!   similar triangles), split only when a link asks for it.
+//!   similar triangles; a long element in two, across its length), split only when a link asks
+//!   for it.
 //! - **Clusters** (Smits, Arvo, Greenberg 1994; Sillion 1995): a binary tree of median splits
 //!   over the input faces sits above them, so refinement starts from one self-link of the root,
 //!   not from faces^2 links: a face gathers from whole clusters while they are far enough. A
@@ -260,7 +261,10 @@ impl Hierarchy {
                         && refine::can_split_to(&self.tree.nodes[n as usize], finest_radius)
                 })
                 .collect();
-            let leaves = self.tree.leaves.len() + 3 * straddling.len();
+            let added: usize = (straddling.iter())
+                .map(|&n| self.tree.children_if_split(n) - 1)
+                .sum();
+            let leaves = self.tree.leaves.len() + added;
             if straddling.is_empty() || leaves > max_leaves {
                 break;
             }
@@ -278,6 +282,12 @@ impl Hierarchy {
             &self.tree.nodes[self.tree.leaves[i] as usize],
             finest_radius,
         )
+    }
+
+    /// How many leaves splitting the `i`-th leaf (as [`Hierarchy::leaf_mesh`] lists them)
+    /// adds: three, or one where it is long and splits across its length.
+    pub fn leaves_added_by_splitting(&self, i: usize) -> usize {
+        self.tree.children_if_split(self.tree.leaves[i]) - 1
     }
 
     /// Splits the leaves `chosen` (their indices, as [`Hierarchy::leaf_mesh`] lists them) for

@@ -121,8 +121,13 @@ impl Hierarchy {
                     );
                 }
                 let determinant = m00 * m11 - m01 * m01;
-                if determinant <= 1e-9 * (m00 + m11) * (m00 + m11) {
+                if m00 + m11 <= 0.0 {
                     return Slope::default();
+                }
+                if determinant <= 1e-9 * (m00 + m11) * (m00 + m11) {
+                    let shift = frame(node.centroid - mean_centre);
+                    let weights = children.iter().map(|(w, _)| *w);
+                    return slope_along_a_row(weights.zip(offsets), [m00, m01, m11], shift);
                 }
                 let reach =
                     [0, 1].map(|k| 0.5 * offsets.iter().map(|d| d[k].abs()).fold(0.0, f64::max));
@@ -196,6 +201,41 @@ impl Hierarchy {
     }
 }
 
+/// The slope of children whose centres lie in a row (a long element split in two across its
+/// length), given their (reached area, offset from the centre) and the weighted second
+/// moments `[m00, m01, m11]` of the offsets: along the row, and none across it. It is read
+/// only as far out along the row as the nearer end of the children's centres, so each reading
+/// is a convex mix of their means (read further, extrapolated, it made the monastery's
+/// solve diverge).
+fn slope_along_a_row(
+    children: impl Iterator<Item = (f64, [f64; 2])> + Clone,
+    [m00, m01, m11]: [f64; 3],
+    shift: [f64; 2],
+) -> Slope {
+    // M's one non-zero eigenvector: either of its rows, the larger for round-off.
+    let along = if m00 >= m11 { [m00, m01] } else { [m01, m11] };
+    let norm = along[0].hypot(along[1]);
+    let e = [along[0] / norm, along[1] / norm];
+    let spread = m00 * e[0] * e[0] + 2.0 * m01 * e[0] * e[1] + m11 * e[1] * e[1];
+    let on_row = |d: [f64; 2]| d[0] * e[0] + d[1] * e[1];
+    let (low, high) = children
+        .clone()
+        .fold((0.0f64, 0.0f64), |(low, high), (_, d)| {
+            (low.min(on_row(d)), high.max(on_row(d)))
+        });
+    let nearer_end = high.min(-low);
+    let mut slope = Slope {
+        shift,
+        reach: [nearer_end * e[0].abs(), nearer_end * e[1].abs()],
+        ..Slope::default()
+    };
+    for (k, (w, d)) in children.enumerate() {
+        let weight = w * on_row(d) / spread;
+        slope.child_weights[k] = [weight * e[0], weight * e[1]];
+    }
+    slope
+}
+
 impl Transport for Hierarchy {
     fn patch_count(&self) -> usize {
         self.tree.leaves.len()
@@ -235,8 +275,11 @@ impl Transport for Hierarchy {
 mod tests {
     use super::*;
     use crate::hierarchy::Link;
-    use crate::hierarchy::fixtures::{build, closed_cube, floor_cut_by_a_box, room_with_a_box};
+    use crate::hierarchy::fixtures::{
+        GREY, add_parallelogram, build, closed_cube, floor_cut_by_a_box, room_with_a_box,
+    };
     use crate::scene::Rgb;
+    use crate::scene::Scene;
     use crate::visibility::Occluders;
 
     #[test]
@@ -350,6 +393,69 @@ mod tests {
                 + slopes[wall as usize][0] * u as f64
                 + slopes[wall as usize][1] * v as f64;
             assert!(read.x >= -1e-12, "at {offset:?}: {}", read.x);
+        }
+    }
+
+    #[test]
+    fn a_row_of_children_reads_a_linear_radiosity_exactly_and_one_bright_half_within_bounds() {
+        // A 4 x 1 strip splits across its length into two halves, and each of those (2 x 1)
+        // into four quarters: the strip's children lie in a row, where only the slope along it can be
+        // fitted (before, such a node read flat). Linear along the strip, its radiosity is
+        // read exactly wherever the model reaches; one half bright and the other dark, no
+        // reading leaves [0, 1], however far out it is asked for.
+        let mut scene = Scene::default();
+        let strip_sides = (DVec3::ZERO, DVec3::X * 4.0, DVec3::Y);
+        add_parallelogram(&mut scene, "strip", strip_sides, GREY);
+        let mut hierarchy = Hierarchy::cluster_tree(&scene);
+        let strip = hierarchy.tree.face_node[0];
+        hierarchy.tree.subdivide(strip);
+        for half in hierarchy.tree.nodes[strip as usize].children() {
+            hierarchy.tree.subdivide(half);
+        }
+        hierarchy.index(&Occluders::new(&scene));
+        assert_eq!(hierarchy.tree.nodes[strip as usize].child_count, 2);
+        assert_eq!(hierarchy.tree.leaves.len(), 8);
+        let centroid = hierarchy.tree.nodes[strip as usize].centroid;
+        let normal = hierarchy.tree.element_patch(strip).normal;
+        let (tangent, bitangent) = normal.any_orthonormal_pair();
+        let s = strip as usize;
+        let read = |radiosity: &[Rgb], offset: [f32; 2]| {
+            let (means, [u, v]) = (
+                hierarchy.pull(radiosity),
+                hierarchy.reading_point(strip, offset),
+            );
+            let slopes = hierarchy.slopes_of(&means);
+            let value = means[s] + slopes[s][0] * u as f64 + slopes[s][1] * v as f64;
+            (
+                value.x,
+                centroid + tangent * u as f64 + bitangent * v as f64,
+            )
+        };
+        let offsets = [
+            [0.0, 0.0],
+            [0.7, -0.2],
+            [-1.3, 0.4],
+            [5.0, 5.0],
+            [-5.0, 5.0],
+        ];
+        let linear = |p: DVec3| 3.0 + 0.5 * (p - centroid).x;
+        let at_leaves = |f: &dyn Fn(DVec3) -> f64| -> Vec<Rgb> {
+            (hierarchy.tree.leaves.iter())
+                .map(|&n| Rgb::splat(f(hierarchy.tree.nodes[n as usize].centroid)))
+                .collect()
+        };
+        let radiosity = at_leaves(&linear);
+        for offset in offsets {
+            let (value, at) = read(&radiosity, offset);
+            assert!((value - linear(at)).abs() < 1e-6, "at {offset:?}: {value}");
+        }
+        let one_bright_half = at_leaves(&|p: DVec3| if p.x < 2.0 { 1.0 } else { 0.0 });
+        for offset in offsets {
+            let (value, _) = read(&one_bright_half, offset);
+            assert!(
+                (-1e-12..=1.0 + 1e-12).contains(&value),
+                "at {offset:?}: {value}"
+            );
         }
     }
 

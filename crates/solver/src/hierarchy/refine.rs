@@ -7,7 +7,7 @@ use super::factor::{
     tangent_coordinates,
 };
 use super::shaft::Visibility;
-use super::tree::{ELEMENT_CHILDREN, MAX_DEPTH, Node};
+use super::tree::{MAX_DEPTH, Node};
 use super::{Hierarchy, Link, Pair};
 use crate::pair::FormFactorSettings;
 use crate::sampling::pair_seed;
@@ -111,9 +111,11 @@ impl Fineness {
 
 /// An element's size as refinement measures it: its bounding radius, or that of the equilateral
 /// triangle of its area where that is smaller, `sqrt(4 A / (3 sqrt 3))`. The same for squares
-/// and well-shaped triangles; a sliver counts as small as its area. Its children are slivers
-/// too (a triangle splits into four like it), so by its length alone a 4 m x 15 cm strip of a
-/// real model split into 1,024 leaves of 4 cm, and such faces made most of its 490k leaves.
+/// and well-shaped triangles; a sliver counts as small as its area. By its length alone a
+/// 4 m x 15 cm strip of a real model split into 1,024 leaves of 4 cm when elements split into
+/// four like themselves, and such faces made most of its 490k leaves; split across their
+/// length (`tree::child_lattices`), slivers still stop by their area: by length, the monastery
+/// made 429k leaves instead of 310k and read 5.83% smooth RMS instead of 5.59%.
 fn element_size(n: &Node) -> f64 {
     n.radius.min((4.0 * n.area / (3.0 * 3.0f64.sqrt())).sqrt())
 }
@@ -557,7 +559,7 @@ impl Hierarchy {
     /// unless the split is forced, as a cluster that receives always splits).
     fn pairs_made(&self, pair: Pair, decision: &Decision) -> (usize, usize) {
         let children = |n: u32| match self.tree.is_unsplit_element(n) {
-            true => ELEMENT_CHILDREN,
+            true => self.tree.children_if_split(n),
             false => self.tree.nodes[n as usize].child_count as usize,
         };
         let now = match decision {
@@ -618,7 +620,7 @@ impl Hierarchy {
                 indices.push(i);
                 if !std::mem::replace(&mut marked[n as usize], true) {
                     // The element stops being a leaf; its children are.
-                    added += ELEMENT_CHILDREN - 1;
+                    added += self.tree.children_if_split(n) - 1;
                 }
             }
         }

@@ -1,6 +1,7 @@
 //! The trees: a binary cluster tree of median splits over the input faces (Smits, Arvo,
 //! Greenberg 1994), and under each face a quadtree of elements on an integer lattice
-//! (Hanrahan, Salzman, Aupperle 1991), split only when a link asks for it.
+//! (Hanrahan, Salzman, Aupperle 1991), split only when a link asks for it; a long element
+//! splits in two across its length instead of in four.
 
 use crate::geometry::{Polygon, bounds};
 use crate::mesh::{Mesh, Patch};
@@ -15,8 +16,14 @@ use std::ops::Range;
 const LATTICE_STEPS: u32 = 1 << 24;
 /// Deepest split of an input face (each level halves the lattice step).
 pub(super) const MAX_DEPTH: u32 = 20;
-/// Children an element splits into: a quad's four quarters, a triangle's four similar ones.
-pub(super) const ELEMENT_CHILDREN: usize = 4;
+/// How many times longer one pair of a quad's sides must be than the other for it to split
+/// across them only, into two halves (near square, just past it); less elongated, it splits
+/// into four quarters like itself. (`sqrt 2`, past which halves are nearer square than
+/// quarters, was measured too: docs/BENCHMARKS.md.)
+const ELONGATED_QUAD: f64 = 2.0;
+/// How many times its height onto its longest side a triangle must be long to split across
+/// its length: past 2 (a right isosceles triangle's) it is a sliver.
+const ELONGATED_TRIANGLE: f64 = 2.0;
 /// Marks "no parent".
 pub(super) const NONE: u32 = u32::MAX;
 
@@ -104,6 +111,70 @@ fn lattice_point(face: &Polygon, at: [u32; 2]) -> DVec3 {
 
 fn midpoint(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
     [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2]
+}
+
+/// The lattices of the children of an element shaped `polygon` with corner lattice points
+/// `l`, and how many there are. An elongated element splits across its length only, so that
+/// its pieces come nearer square: a quad into two halves across its long sides, a triangle
+/// into a triangle and a quad by the cut through its long sides' midpoints, parallel to its
+/// shortest side. Else a quad splits into four quarters, a triangle into four similar ones.
+/// Split into four like itself, a sliver's pieces are slivers: a strip 18 m x 24 cm atop a
+/// real model's wall became leaves 2.3 m x 3 cm, the light along them (a moulding's shadow
+/// ending half way) read from corners metres apart; the monastery read 5.98% smooth RMS with
+/// 435k leaves, split across, 5.59% with 310k (docs/BENCHMARKS.md).
+fn child_lattices(polygon: &Polygon, l: [[u32; 2]; 4]) -> ([[[u32; 2]; 4]; 4], usize) {
+    let c = polygon.corners();
+    let mid = midpoint;
+    if c.len() == 4 {
+        let along_first = c[0].distance(c[1]) + c[3].distance(c[2]);
+        let along_second = c[0].distance(c[3]) + c[1].distance(c[2]);
+        let (m01, m12, m23, m30) = (
+            mid(l[0], l[1]),
+            mid(l[1], l[2]),
+            mid(l[2], l[3]),
+            mid(l[3], l[0]),
+        );
+        if along_first > ELONGATED_QUAD * along_second {
+            let halves = [[l[0], m01, m23, l[3]], [m01, l[1], l[2], m23]];
+            return ([halves[0], halves[1], halves[0], halves[0]], 2);
+        }
+        if along_second > ELONGATED_QUAD * along_first {
+            let halves = [[l[0], l[1], m12, m30], [m30, m12, l[2], l[3]]];
+            return ([halves[0], halves[1], halves[0], halves[0]], 2);
+        }
+        // The lattice centre: a quad cut from a triangle is a trapezoid, whose diagonals'
+        // midpoints differ.
+        let centre = mid(mid(l[0], l[1]), mid(l[3], l[2]));
+        let quarters = [
+            [l[0], m01, centre, m30],
+            [m01, l[1], m12, centre],
+            [centre, m12, l[2], m23],
+            [m30, centre, m23, l[3]],
+        ];
+        return (quarters, 4);
+    }
+    let sides = [0, 1, 2].map(|k| c[k].distance(c[(k + 1) % 3]));
+    let longest = sides.iter().copied().fold(0.0, f64::max);
+    // The height onto the longest side is twice the area over it; the margin keeps a right
+    // isosceles triangle's round-off from cutting it one way and its like the other.
+    if longest * longest > ELONGATED_TRIANGLE * 2.0 * polygon.area() * (1.0 + 1e-9) {
+        let shortest = (0..3)
+            .min_by(|&a, &b| sides[a].total_cmp(&sides[b]))
+            .unwrap_or(0);
+        let apex = (shortest + 2) % 3;
+        let (a, b, d) = (l[apex], l[(apex + 1) % 3], l[(apex + 2) % 3]);
+        let (ab, ad) = (mid(a, b), mid(a, d));
+        let tip = [a, ab, ad, ad];
+        return ([tip, [ab, b, d, ad], tip, tip], 2);
+    }
+    let (ab, bc, ca) = (mid(l[0], l[1]), mid(l[1], l[2]), mid(l[2], l[0]));
+    let similar = [
+        [l[0], ab, ca, ca],
+        [ab, l[1], bc, bc],
+        [ca, bc, l[2], l[2]],
+        [ab, bc, ca, ca],
+    ];
+    (similar, 4)
 }
 
 /// Face `face` of `scene` as one unsplit element, its size scale capped at `typical_radius`.
@@ -256,13 +327,21 @@ impl Tree {
             .patch
     }
 
-    /// Whether node `n` is an element not split yet: splitting it adds three leaves.
+    /// Whether node `n` is an element not split yet: splitting it adds
+    /// [`Tree::children_if_split`] less one leaves.
     pub(super) fn is_unsplit_element(&self, n: u32) -> bool {
         let node = &self.nodes[n as usize];
         node.element.is_some() && node.child_count == 0
     }
 
-    /// Splits element `n` into four (once).
+    /// How many children element `n` splits into ([`child_lattices`]).
+    pub(super) fn children_if_split(&self, n: u32) -> usize {
+        let element = self.nodes[n as usize].element.as_ref();
+        let element = element.expect("only elements are subdivided");
+        child_lattices(&element.patch.polygon, element.lattice).1
+    }
+
+    /// Splits element `n` into its children ([`child_lattices`]), once.
     pub(super) fn subdivide(&mut self, n: u32) {
         let node = &self.nodes[n as usize];
         if node.child_count > 0 {
@@ -271,38 +350,11 @@ impl Tree {
         let element = node.element.clone().expect("only elements are subdivided");
         let faces = node.faces.clone();
         let face = &self.faces[element.patch.face as usize];
-        let l = element.lattice;
-        let children: [[[u32; 2]; 4]; ELEMENT_CHILDREN] = if face.is_quad() {
-            let centre = midpoint(l[0], l[2]);
-            let (m01, m12, m23, m30) = (
-                midpoint(l[0], l[1]),
-                midpoint(l[1], l[2]),
-                midpoint(l[2], l[3]),
-                midpoint(l[3], l[0]),
-            );
-            [
-                [l[0], m01, centre, m30],
-                [m01, l[1], m12, centre],
-                [centre, m12, l[2], m23],
-                [m30, centre, m23, l[3]],
-            ]
-        } else {
-            let (ab, bc, ca) = (
-                midpoint(l[0], l[1]),
-                midpoint(l[1], l[2]),
-                midpoint(l[2], l[0]),
-            );
-            [
-                [l[0], ab, ca, ca],
-                [ab, l[1], bc, bc],
-                [ca, bc, l[2], l[2]],
-                [ab, bc, ca, ca],
-            ]
-        };
+        let (children, count) = child_lattices(&element.patch.polygon, element.lattice);
         let first = self.nodes.len() as u32;
-        for lattice in children {
+        for &lattice in &children[..count] {
             let p = lattice.map(|at| lattice_point(face, at));
-            let polygon = if face.is_quad() {
+            let polygon = if lattice[3] != lattice[2] {
                 Polygon::quad(p[0], p[1], p[2], p[3])
             } else {
                 Polygon::triangle(p[0], p[1], p[2])
@@ -324,7 +376,7 @@ impl Tree {
         }
         let node = &mut self.nodes[n as usize];
         node.first_child = first;
-        node.child_count = 4;
+        node.child_count = count as u32;
     }
 
     /// A point of node `n` for the `k`-th sample of a stream. Points spread by area over the
@@ -475,6 +527,7 @@ pub(super) fn element_node(mut e: Element, parent: u32, faces: Range<u32>) -> No
 #[cfg(test)]
 mod tests {
     use super::Tree;
+    use crate::geometry::Polygon;
     use crate::hierarchy::fixtures::{GREY, add_parallelogram, build, closed_cube};
     use crate::sampling::splitmix64;
     use crate::scene::Scene;
@@ -520,6 +573,82 @@ mod tests {
                 "square {square}: {below} of {}",
                 on.len()
             );
+        }
+    }
+
+    /// The leaves of `tree`'s face `face` once every leaf of it wider than `size` is split.
+    fn split_down_to(tree: &mut Tree, face: usize, size: f64) -> Vec<u32> {
+        loop {
+            tree.collect_leaves();
+            let leaves: Vec<u32> = tree
+                .leaves
+                .clone()
+                .into_iter()
+                .filter(|&n| tree.element_patch(n).face == face as u32)
+                .collect();
+            let wide: Vec<u32> = leaves
+                .iter()
+                .copied()
+                .filter(|&n| tree.nodes[n as usize].radius > size)
+                .collect();
+            if wide.is_empty() {
+                return leaves;
+            }
+            wide.into_iter().for_each(|n| tree.subdivide(n));
+        }
+    }
+
+    /// The longest side of a polygon over its height onto that side.
+    fn elongation(polygon: &Polygon) -> f64 {
+        let c = polygon.corners();
+        let longest = (0..c.len())
+            .map(|k| c[k].distance(c[(k + 1) % c.len()]))
+            .fold(0.0, f64::max);
+        longest * longest / polygon.area() / if c.len() == 3 { 2.0 } else { 1.0 }
+    }
+
+    #[test]
+    fn long_elements_split_across_their_length_into_pieces_near_square() {
+        // A 16 x 0.25 strip as a quad and as a right triangle (a roof sliver of a real model),
+        // a unit square and a unit right triangle, each split until no piece is larger than
+        // 0.2 about its centroid. Split into four like themselves, the strips' pieces would be
+        // strips 64 times longer than wide, 4,096 of them; across their length, every face's
+        // pieces are about as many as its area holds squares of side 0.25 and tile it, and a
+        // quad face's pieces are near square (a triangle's near its sharp corner cannot be).
+        let mut scene = Scene::default();
+        let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
+        add_parallelogram(&mut scene, "strip", (DVec3::ZERO, x * 16.0, z * 0.25), GREY);
+        add_parallelogram(&mut scene, "square", (y, x, z), GREY);
+        let object = scene.add_object("triangles");
+        scene.add_polygon(
+            object,
+            &[y * 2.0, y * 2.0 + x * 16.0, y * 2.0 + z * 0.25],
+            GREY,
+        );
+        scene.add_polygon(object, &[y * 3.0, y * 3.0 + x, y * 3.0 + z], GREY);
+        let mut tree = Tree::over(&scene);
+        for face in 0..4 {
+            let polygon = tree.faces[face];
+            let leaves = split_down_to(&mut tree, face, 0.2);
+            let area: f64 = leaves.iter().map(|&n| tree.nodes[n as usize].area).sum();
+            assert!(
+                (area / polygon.area() - 1.0).abs() < 1e-12,
+                "face {face}: {area}"
+            );
+            let squares = polygon.area() / (0.25 * 0.25);
+            assert!(
+                leaves.len() as f64 <= 2.0 * squares,
+                "face {face}: {} pieces",
+                leaves.len()
+            );
+            for &n in &leaves {
+                let piece = tree.element_patch(n).polygon;
+                assert!(
+                    !polygon.is_quad() || elongation(&piece) <= 2.0,
+                    "face {face}: {:?}",
+                    piece.corners()
+                );
+            }
         }
     }
 

@@ -81,11 +81,17 @@ pub(super) fn split_where_direct_light_curves(
         .filter(|&i| misfit[i] > tolerance && hierarchy.can_split_leaf(i, display_finest))
         .map(|i| (misfit[i] * misfit[i] * mesh.patches[i].area, i))
         .collect();
-    // Each split leaf becomes four.
     let left = settings.max_leaves.saturating_sub(mesh.patches.len());
-    let room = (left as f64 * DISPLAY_ROOM_SHARE) as usize / 3;
+    let mut room = (left as f64 * DISPLAY_ROOM_SHARE) as usize;
     worst.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
-    worst.truncate(room);
+    let fitting = worst
+        .iter()
+        .take_while(|(_, i)| {
+            let added = hierarchy.leaves_added_by_splitting(*i);
+            room.checked_sub(added).map(|left| room = left).is_some()
+        })
+        .count();
+    worst.truncate(fitting);
     if worst.is_empty() {
         return Displayed {
             light: light.with_gathered_bounces(scene, &mesh, occluders, progress),
