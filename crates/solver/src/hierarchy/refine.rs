@@ -114,7 +114,7 @@ impl Fineness {
 /// and well-shaped triangles; a sliver counts as small as its area. By its length alone a
 /// 4 m x 15 cm strip of a real model split into 1,024 leaves of 4 cm when elements split into
 /// four like themselves, and such faces made most of its 490k leaves; split across their
-/// length (`tree::child_lattices`), slivers still stop by their area: by length, the monastery
+/// length (`tree::SplitShape`), slivers still stop by their area: by length, the monastery
 /// made 429k leaves instead of 310k and read 5.83% smooth RMS instead of 5.59%.
 fn element_size(n: &Node) -> f64 {
     n.radius.min((4.0 * n.area / (3.0 * 3.0f64.sqrt())).sqrt())

@@ -113,68 +113,114 @@ fn midpoint(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
     [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2]
 }
 
-/// The lattices of the children of an element shaped `polygon` with corner lattice points
-/// `l`, and how many there are. An elongated element splits across its length only, so that
-/// its pieces come nearer square: a quad into two halves across its long sides, a triangle
-/// into a triangle and a quad by the cut through its long sides' midpoints, parallel to its
-/// shortest side. Else a quad splits into four quarters, a triangle into four similar ones.
+/// How an element splits. An elongated element splits across its length only, so that its
+/// pieces come nearer square: a quad into two halves across its long sides, a triangle into a
+/// triangle and a quad by the cut through its long sides' midpoints, parallel to its shortest
+/// side. Else a quad splits into four quarters, a triangle into four similar ones.
 /// Split into four like itself, a sliver's pieces are slivers: a strip 18 m x 24 cm atop a
 /// real model's wall became leaves 2.3 m x 3 cm, the light along them (a moulding's shadow
 /// ending half way) read from corners metres apart; the monastery read 5.98% smooth RMS with
 /// 435k leaves, split across, 5.59% with 310k (docs/BENCHMARKS.md).
-fn child_lattices(polygon: &Polygon, l: [[u32; 2]; 4]) -> ([[[u32; 2]; 4]; 4], usize) {
-    let c = polygon.corners();
-    let mid = midpoint;
-    if c.len() == 4 {
-        let along_first = c[0].distance(c[1]) + c[3].distance(c[2]);
-        let along_second = c[0].distance(c[3]) + c[1].distance(c[2]);
-        let (m01, m12, m23, m30) = (
-            mid(l[0], l[1]),
-            mid(l[1], l[2]),
-            mid(l[2], l[3]),
-            mid(l[3], l[0]),
-        );
-        if along_first > ELONGATED_QUAD * along_second {
-            let halves = [[l[0], m01, m23, l[3]], [m01, l[1], l[2], m23]];
-            return ([halves[0], halves[1], halves[0], halves[0]], 2);
+#[derive(Clone, Copy)]
+enum SplitShape {
+    /// Two halves, cutting the sides from corner 0 to 1 and from 3 to 2.
+    QuadHalvesAcrossFirstSides,
+    /// Two halves, cutting the sides from corner 1 to 2 and from 3 to 0.
+    QuadHalvesAcrossSecondSides,
+    QuadQuarters,
+    /// A tip triangle at corner `apex` and the trapezoid left.
+    TriangleCutBelow {
+        apex: usize,
+    },
+    TriangleQuarters,
+}
+
+impl SplitShape {
+    fn of(polygon: &Polygon) -> SplitShape {
+        let c = polygon.corners();
+        if c.len() == 4 {
+            let along_first = c[0].distance(c[1]) + c[3].distance(c[2]);
+            let along_second = c[0].distance(c[3]) + c[1].distance(c[2]);
+            return if along_first > ELONGATED_QUAD * along_second {
+                SplitShape::QuadHalvesAcrossFirstSides
+            } else if along_second > ELONGATED_QUAD * along_first {
+                SplitShape::QuadHalvesAcrossSecondSides
+            } else {
+                SplitShape::QuadQuarters
+            };
         }
-        if along_second > ELONGATED_QUAD * along_first {
-            let halves = [[l[0], l[1], m12, m30], [m30, m12, l[2], l[3]]];
-            return ([halves[0], halves[1], halves[0], halves[0]], 2);
+        let sides = [0, 1, 2].map(|k| c[k].distance(c[(k + 1) % 3]));
+        let longest = sides.iter().copied().fold(0.0, f64::max);
+        // The height onto the longest side is twice the area over it; the margin keeps a right
+        // isosceles triangle's round-off from cutting it one way and its like the other.
+        if longest * longest > ELONGATED_TRIANGLE * 2.0 * polygon.area() * (1.0 + 1e-9) {
+            let shortest = (0..3)
+                .min_by(|&a, &b| sides[a].total_cmp(&sides[b]))
+                .unwrap_or(0);
+            SplitShape::TriangleCutBelow {
+                apex: (shortest + 2) % 3,
+            }
+        } else {
+            SplitShape::TriangleQuarters
         }
-        // The lattice centre: a quad cut from a triangle is a trapezoid, whose diagonals'
-        // midpoints differ.
-        let centre = mid(mid(l[0], l[1]), mid(l[3], l[2]));
-        let quarters = [
-            [l[0], m01, centre, m30],
-            [m01, l[1], m12, centre],
-            [centre, m12, l[2], m23],
-            [m30, centre, m23, l[3]],
-        ];
-        return (quarters, 4);
     }
-    let sides = [0, 1, 2].map(|k| c[k].distance(c[(k + 1) % 3]));
-    let longest = sides.iter().copied().fold(0.0, f64::max);
-    // The height onto the longest side is twice the area over it; the margin keeps a right
-    // isosceles triangle's round-off from cutting it one way and its like the other.
-    if longest * longest > ELONGATED_TRIANGLE * 2.0 * polygon.area() * (1.0 + 1e-9) {
-        let shortest = (0..3)
-            .min_by(|&a, &b| sides[a].total_cmp(&sides[b]))
-            .unwrap_or(0);
-        let apex = (shortest + 2) % 3;
-        let (a, b, d) = (l[apex], l[(apex + 1) % 3], l[(apex + 2) % 3]);
-        let (ab, ad) = (mid(a, b), mid(a, d));
-        let tip = [a, ab, ad, ad];
-        return ([tip, [ab, b, d, ad], tip, tip], 2);
+
+    fn child_count(self) -> usize {
+        match self {
+            SplitShape::QuadQuarters | SplitShape::TriangleQuarters => 4,
+            _ => 2,
+        }
     }
-    let (ab, bc, ca) = (mid(l[0], l[1]), mid(l[1], l[2]), mid(l[2], l[0]));
-    let similar = [
-        [l[0], ab, ca, ca],
-        [ab, l[1], bc, bc],
-        [ca, bc, l[2], l[2]],
-        [ab, bc, ca, ca],
-    ];
-    (similar, 4)
+
+    /// The children's lattices for an element with corner lattice points `l`; the first
+    /// [`SplitShape::child_count`] are the children.
+    fn child_lattices(self, l: [[u32; 2]; 4]) -> [[[u32; 2]; 4]; 4] {
+        let mid = midpoint;
+        match self {
+            SplitShape::QuadHalvesAcrossFirstSides => {
+                let (m01, m23) = (mid(l[0], l[1]), mid(l[2], l[3]));
+                let first = [l[0], m01, m23, l[3]];
+                [first, [m01, l[1], l[2], m23], first, first]
+            }
+            SplitShape::QuadHalvesAcrossSecondSides => {
+                let (m12, m30) = (mid(l[1], l[2]), mid(l[3], l[0]));
+                let first = [l[0], l[1], m12, m30];
+                [first, [m30, m12, l[2], l[3]], first, first]
+            }
+            SplitShape::QuadQuarters => {
+                let (m01, m12, m23, m30) = (
+                    mid(l[0], l[1]),
+                    mid(l[1], l[2]),
+                    mid(l[2], l[3]),
+                    mid(l[3], l[0]),
+                );
+                // The lattice centre: a quad cut from a triangle is a trapezoid, whose
+                // diagonals' midpoints differ.
+                let centre = mid(mid(l[0], l[1]), mid(l[3], l[2]));
+                [
+                    [l[0], m01, centre, m30],
+                    [m01, l[1], m12, centre],
+                    [centre, m12, l[2], m23],
+                    [m30, centre, m23, l[3]],
+                ]
+            }
+            SplitShape::TriangleCutBelow { apex } => {
+                let (a, b, d) = (l[apex], l[(apex + 1) % 3], l[(apex + 2) % 3]);
+                let (ab, ad) = (mid(a, b), mid(a, d));
+                let tip = [a, ab, ad, ad];
+                [tip, [ab, b, d, ad], tip, tip]
+            }
+            SplitShape::TriangleQuarters => {
+                let (ab, bc, ca) = (mid(l[0], l[1]), mid(l[1], l[2]), mid(l[2], l[0]));
+                [
+                    [l[0], ab, ca, ca],
+                    [ab, l[1], bc, bc],
+                    [ca, bc, l[2], l[2]],
+                    [ab, bc, ca, ca],
+                ]
+            }
+        }
+    }
 }
 
 /// Face `face` of `scene` as one unsplit element, its size scale capped at `typical_radius`.
@@ -334,14 +380,14 @@ impl Tree {
         node.element.is_some() && node.child_count == 0
     }
 
-    /// How many children element `n` splits into ([`child_lattices`]).
+    /// How many children element `n` splits into ([`SplitShape`]).
     pub(super) fn children_if_split(&self, n: u32) -> usize {
         let element = self.nodes[n as usize].element.as_ref();
         let element = element.expect("only elements are subdivided");
-        child_lattices(&element.patch.polygon, element.lattice).1
+        SplitShape::of(&element.patch.polygon).child_count()
     }
 
-    /// Splits element `n` into its children ([`child_lattices`]), once.
+    /// Splits element `n` into its children ([`SplitShape`]), once.
     pub(super) fn subdivide(&mut self, n: u32) {
         let node = &self.nodes[n as usize];
         if node.child_count > 0 {
@@ -350,7 +396,8 @@ impl Tree {
         let element = node.element.clone().expect("only elements are subdivided");
         let faces = node.faces.clone();
         let face = &self.faces[element.patch.face as usize];
-        let (children, count) = child_lattices(&element.patch.polygon, element.lattice);
+        let shape = SplitShape::of(&element.patch.polygon);
+        let (children, count) = (shape.child_lattices(element.lattice), shape.child_count());
         let first = self.nodes.len() as u32;
         for &lattice in &children[..count] {
             let p = lattice.map(|at| lattice_point(face, at));
