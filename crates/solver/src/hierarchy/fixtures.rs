@@ -105,6 +105,12 @@ pub(crate) fn room_with_a_box() -> Scene {
 /// closed box 10 cm tall above the floor and 50 cm below it, wider than the floor: the floor
 /// beyond `x = edge` lies inside the box, where no light reaches.
 pub(crate) fn floor_cut_by_a_box(edge: f64) -> Scene {
+    floor_and_a_box(dvec3(edge, -0.5, -0.5), dvec3(1.0, 0.6, 2.0))
+}
+
+/// A unit square floor (x and z in [0, 1], facing up) under a unit square lamp 10 m above it,
+/// and a closed box of least corner `corner` and extent `size`.
+pub(crate) fn floor_and_a_box(corner: DVec3, size: DVec3) -> Scene {
     let mut scene = Scene::default();
     let lamp = Material {
         emission: Rgb::ONE,
@@ -113,7 +119,6 @@ pub(crate) fn floor_cut_by_a_box(edge: f64) -> Scene {
     let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
     add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z, x), GREY);
     add_parallelogram(&mut scene, "lamp", (y * 10.0, x, z), lamp);
-    let (corner, size) = (dvec3(edge, -0.5, -0.5), dvec3(1.0, 0.6, 2.0));
     let bottom = (corner, x, z);
     for (origin, u, v) in unit_box(corner).into_iter().chain([bottom]) {
         let sides = (corner + (origin - corner) * size, u * size, v * size);

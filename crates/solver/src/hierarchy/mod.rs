@@ -28,8 +28,9 @@
 //! - **Reach**: a point every cosine ray from which meets a back face (under a box on the
 //!   floor, inside a wall through it) is buried; sources send their mean over the area light
 //!   reaches, an element's gathered light is pushed down to its reached parts only, and a leaf
-//!   that straddles the reach's edge (faces of real models pass through one another) splits
-//!   to the finest element after each refinement.
+//!   that straddles the reach's edge (faces of real models pass through one another: its test
+//!   points disagree, or a face crosses it between them) splits to the finest element after
+//!   each refinement.
 //! - **Solving**: pull (area-weighted means up the trees), gather along links, push (sums down
 //!   to the leaves) is a linear operator on the leaves, so it is a [`Transport`] and the same
 //!   GMRES and Jacobi solve it. No dense matrix anywhere: memory is O(elements + links).

@@ -1,13 +1,15 @@
 //! Where light can reach: a leaf point is buried when every cosine ray from it meets the back
 //! of a face (under a box on the floor, inside a wall that cuts through it). Sources send their
 //! mean over the reached area, errors are measured against the mean over it, what an element
-//! gathers is pushed down to its reached parts only, and leaves whose points disagree straddle
-//! the edge of the reach (refinement splits them).
+//! gathers is pushed down to its reached parts only, and leaves whose points disagree, or that
+//! a face crosses between them, straddle the edge of the reach (refinement splits them).
 
 use super::tree::{NONE, Tree};
+use crate::mesh::Patch;
 use crate::sampling::pair_seed;
 use crate::scene::Rgb;
 use crate::visibility::Occluders;
+use glam::DVec3;
 use rayon::prelude::*;
 
 /// How much of each node light can reach.
@@ -28,6 +30,29 @@ pub(super) struct Reach {
 /// How far toward its centroid a leaf's corner is tested for burial: where the display's
 /// corner values are read (`solution::gather_point`'s `INSET`).
 const CORNER_INSET: f64 = 0.25;
+
+/// How far above a leaf the segments that look for a face crossing it run, as a fraction of
+/// its radius: above round-off and coplanar duplicates, below any real solid's thickness.
+const CROSSING_LIFT: f64 = 1e-3;
+
+/// Whether some face crosses or stands on `patch` (radius `radius`) between the points its
+/// corner values are read from: a segment just above its surface from each such point to the
+/// next and to the centroid meets a face. Such a face bounds a buried part the leaf's test
+/// points all missed, or a contact line, where light changes at once.
+fn a_face_crosses(patch: &Patch, radius: f64, occluders: &Occluders) -> bool {
+    let lift = patch.normal * (radius * CROSSING_LIFT);
+    let centroid = patch.polygon.centroid() + lift;
+    let corners = patch.polygon.corners();
+    let insets: Vec<DVec3> = (corners.iter())
+        .map(|&c| c + (patch.polygon.centroid() - c) * CORNER_INSET + lift)
+        .collect();
+    let own = [patch.face, patch.face];
+    (0..insets.len()).any(|k| {
+        let next = insets[(k + 1) % insets.len()];
+        !occluders.segment_is_clear(insets[k], next, own)
+            || !occluders.segment_is_clear(insets[k], centroid, own)
+    })
+}
 
 impl Reach {
     /// Measures the leaves of `tree` not measured yet and sums the reached area up the trees.
@@ -66,7 +91,14 @@ impl Reach {
                         share += weight;
                     }
                 }
-                (share, buried > 0 && buried < points)
+                // Every point reached, a face may still cross the leaf between them: a column
+                // through a strip of wall 24 cm high, narrower than the strip's leaves.
+                let straddles = if buried == 0 {
+                    a_face_crosses(patch, tree.nodes[n as usize].radius, occluders)
+                } else {
+                    buried < points
+                };
+                (share, straddles)
             })
             .collect();
         for (n, (share, straddles)) in unmeasured.into_iter().zip(measured) {
@@ -139,9 +171,13 @@ impl Reach {
 
 #[cfg(test)]
 mod tests {
-    use crate::hierarchy::fixtures::{build, floor_cut_by_a_box, room_with_a_box};
-    use crate::hierarchy::refine::can_split_to;
-    use crate::hierarchy::{Hierarchy, receiving_area};
+    use super::Reach;
+    use crate::hierarchy::fixtures::{build, floor_and_a_box, floor_cut_by_a_box, room_with_a_box};
+    use crate::hierarchy::refine::{can_split_to, finest_radius};
+    use crate::hierarchy::tree::Tree;
+    use crate::hierarchy::{Hierarchy, HierarchySettings, receiving_area};
+    use crate::visibility::Occluders;
+    use glam::dvec3;
 
     #[test]
     fn a_box_on_the_floor_buries_its_footprint_and_nothing_else() {
@@ -166,6 +202,56 @@ mod tests {
                 hierarchy.reach.seen_area[node]
             );
         }
+    }
+
+    /// Whether the unsplit floor of [`floor_and_a_box`] with a post 10 cm x 11 cm across,
+    /// whose foot is at `foot`, straddles the edge of where light reaches.
+    fn unsplit_floor_straddles(foot: f64) -> bool {
+        // Across the segment from inset corner (0.125, 0.125) to (0.875, 0.125) (and those of
+        // the floor's quarters and their quarters), off the floor's centre, diagonals and
+        // quadrature points: no test point lies inside it.
+        let scene = floor_and_a_box(dvec3(0.2, foot, 0.05), dvec3(0.1, 0.6, 0.11));
+        let occluders = Occluders::new(&scene);
+        let mut tree = Tree::over(&scene);
+        tree.collect_leaves();
+        let mut reach = Reach::default();
+        reach.measure(&tree, &occluders);
+        let floor = tree.face_node[0] as usize;
+        assert_eq!(reach.seen_share[floor], 1.0, "every test point is reached");
+        reach.straddles[floor]
+    }
+
+    #[test]
+    fn a_post_through_a_leaf_between_its_test_points_makes_it_straddle() {
+        assert!(unsplit_floor_straddles(-0.5), "a post through the floor");
+        assert!(unsplit_floor_straddles(0.0), "a post standing on the floor");
+        assert!(
+            !unsplit_floor_straddles(0.05),
+            "a post 5 cm above the floor"
+        );
+    }
+
+    #[test]
+    fn a_posts_footprint_is_buried_once_the_floor_splits_around_it() {
+        let footprint = 0.1 * 0.11;
+        let scene = floor_and_a_box(dvec3(0.2, -0.5, 0.05), dvec3(0.1, 0.6, 0.11));
+        let hierarchy = build(&scene, 0.5);
+        let floor = hierarchy.tree.face_node[0] as usize;
+        let reached = hierarchy.reach.seen_area[floor];
+        println!("floor reached area {reached}, exact {}", 1.0 - footprint);
+        // The pieces over the post's sides split to the finest element; each is read at a few
+        // points, so the area they add or take is at most theirs.
+        let finest = finest_radius(
+            receiving_area(&scene),
+            HierarchySettings::default().max_leaves,
+        );
+        let edge_pieces = 2.0 * (0.1 + 0.11) / (2.0 * finest) + 4.0;
+        let slack = edge_pieces * (2.0 * finest).powi(2);
+        assert!(
+            (reached - (1.0 - footprint)).abs() < slack,
+            "{reached} vs {}",
+            1.0 - footprint
+        );
     }
 
     #[test]
