@@ -35,22 +35,27 @@ const CORNER_INSET: f64 = 0.25;
 /// its radius: above round-off and coplanar duplicates, below any real solid's thickness.
 const CROSSING_LIFT: f64 = 1e-3;
 
-/// Whether some face crosses or stands on `patch` (radius `radius`) between the points its
-/// corner values are read from: a segment just above its surface from each such point to the
-/// next and to the centroid meets a face. Such a face bounds a buried part the leaf's test
-/// points all missed, or a contact line, where light changes at once.
-fn a_face_crosses(patch: &Patch, radius: f64, occluders: &Occluders) -> bool {
+/// The points of `patch` where viewers' corner values are read: each corner moved
+/// [`CORNER_INSET`] of the way to the centroid.
+fn corner_insets(patch: &Patch) -> Vec<DVec3> {
+    let centroid = patch.polygon.centroid();
+    (patch.polygon.corners().iter())
+        .map(|&c| c + (centroid - c) * CORNER_INSET)
+        .collect()
+}
+
+/// Whether some face crosses or stands on `patch` (radius `radius`) between its corner insets
+/// ([`corner_insets`]): a segment just above its surface from each inset to the next and to
+/// the centroid meets a face. Such a face bounds a buried part the leaf's test points all
+/// missed, or a contact line, where light changes at once.
+fn a_face_crosses(patch: &Patch, insets: &[DVec3], radius: f64, occluders: &Occluders) -> bool {
     let lift = patch.normal * (radius * CROSSING_LIFT);
     let centroid = patch.polygon.centroid() + lift;
-    let corners = patch.polygon.corners();
-    let insets: Vec<DVec3> = (corners.iter())
-        .map(|&c| c + (patch.polygon.centroid() - c) * CORNER_INSET + lift)
-        .collect();
     let own = [patch.face, patch.face];
     (0..insets.len()).any(|k| {
-        let next = insets[(k + 1) % insets.len()];
-        !occluders.segment_is_clear(insets[k], next, own)
-            || !occluders.segment_is_clear(insets[k], centroid, own)
+        let (inset, next) = (insets[k] + lift, insets[(k + 1) % insets.len()] + lift);
+        !occluders.segment_is_clear(inset, next, own)
+            || !occluders.segment_is_clear(inset, centroid, own)
     })
 }
 
@@ -75,14 +80,10 @@ impl Reach {
                     .for_each_quadrature_point(1, |x, weight| quadrature.push((x, weight)));
                 // Also where viewers' corner values are read (`solution::gather_point`'s inset
                 // points): a corner of a sliver can lie inside a wall its quadrature points miss.
-                let centroid = patch.polygon.centroid();
-                let insets = patch
-                    .polygon
-                    .corners()
-                    .iter()
-                    .map(|&c| (c + (centroid - c) * CORNER_INSET, 0.0));
+                let insets = corner_insets(patch);
+                let unweighted = insets.iter().map(|&x| (x, 0.0));
                 let (mut share, mut buried, mut points) = (0.0, 0, 0);
-                for (k, (x, weight)) in quadrature.into_iter().chain(insets).enumerate() {
+                for (k, (x, weight)) in quadrature.into_iter().chain(unweighted).enumerate() {
                     points += 1;
                     let seed = pair_seed(n as usize, k + 1);
                     if occluders.is_buried(x, patch.normal, patch.face, seed) {
@@ -94,7 +95,7 @@ impl Reach {
                 // Every point reached, a face may still cross the leaf between them: a column
                 // through a strip of wall 24 cm high, narrower than the strip's leaves.
                 let straddles = if buried == 0 {
-                    a_face_crosses(patch, tree.nodes[n as usize].radius, occluders)
+                    a_face_crosses(patch, &insets, tree.nodes[n as usize].radius, occluders)
                 } else {
                     buried < points
                 };
