@@ -118,8 +118,8 @@ fn midpoint(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
 /// triangle and a quad by the cut through its long sides' midpoints, parallel to its shortest
 /// side. Else a quad splits into four quarters, a triangle into four similar ones.
 /// Split into four like itself, a sliver's pieces are slivers: a strip 18 m x 24 cm atop a
-/// real model's wall became leaves 2.3 m x 3 cm, the light along them (a moulding's shadow
-/// ending half way) read from corners metres apart; the monastery read 5.98% smooth RMS with
+/// real model's wall became leaves 2.3 m x 3 cm, the light along them (where a column passes
+/// through the strip) read from corners metres apart; the monastery read 5.98% smooth RMS with
 /// 435k leaves, split across, 5.59% with 310k (docs/BENCHMARKS.md).
 #[derive(Clone, Copy)]
 enum SplitShape {
@@ -196,7 +196,7 @@ impl SplitShape {
                 );
                 // The lattice centre: a quad cut from a triangle is a trapezoid, whose
                 // diagonals' midpoints differ.
-                let centre = mid(mid(l[0], l[1]), mid(l[3], l[2]));
+                let centre = mid(m01, m23);
                 [
                     [l[0], m01, centre, m30],
                     [m01, l[1], m12, centre],
