@@ -42,6 +42,20 @@ pub struct Patch {
     pub emission: Rgb,
 }
 
+/// How far toward the centre of a patch that uses it a corner's light is read, as a fraction
+/// of the distance: its shadow rays start there, and the reach tests burial there. Visibility
+/// at a corner is so the mean over a small neighbourhood, not a point sample: a corner a
+/// hair's breadth inside a contact line that falls between lattice points would otherwise
+/// read fully dark while the probes just outside are lit (measured on the Cornell box: 0.25
+/// lowers the smooth RMS at every knob; 1e-3 raises it at knob 0.05; 0.5 blurs penumbrae on
+/// the shadow slab).
+pub(crate) const CORNER_READING_INSET: f64 = 0.25;
+
+/// The point [`CORNER_READING_INSET`] of the way from `corner` toward `inside`.
+pub(crate) fn corner_reading_point(corner: DVec3, inside: DVec3) -> DVec3 {
+    corner + (inside - corner) * CORNER_READING_INSET
+}
+
 impl Patch {
     /// Number of corners, three or four.
     pub fn corner_count(&self) -> usize {

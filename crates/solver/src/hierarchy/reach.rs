@@ -5,7 +5,7 @@
 //! a face crosses between them, straddle the edge of the reach (refinement splits them).
 
 use super::tree::{NONE, Tree};
-use crate::mesh::Patch;
+use crate::mesh::{Patch, corner_reading_point};
 use crate::sampling::pair_seed;
 use crate::scene::Rgb;
 use crate::visibility::Occluders;
@@ -27,20 +27,16 @@ pub(super) struct Reach {
     pub(super) straddles: Vec<bool>,
 }
 
-/// How far toward its centroid a leaf's corner is tested for burial: where the display's
-/// corner values are read (`solution::gather_point`'s `INSET`).
-const CORNER_INSET: f64 = 0.25;
-
 /// How far above a leaf the segments that look for a face crossing it run, as a fraction of
 /// its radius: above round-off and coplanar duplicates, below any real solid's thickness.
 const CROSSING_LIFT: f64 = 1e-3;
 
-/// The points of `patch` where viewers' corner values are read: each corner moved
-/// [`CORNER_INSET`] of the way to the centroid.
+/// The points of `patch` where viewers' corner values are read
+/// ([`corner_reading_point`], toward the centroid).
 fn corner_insets(patch: &Patch) -> Vec<DVec3> {
     let centroid = patch.polygon.centroid();
     (patch.polygon.corners().iter())
-        .map(|&c| c + (centroid - c) * CORNER_INSET)
+        .map(|&c| corner_reading_point(c, centroid))
         .collect()
 }
 
@@ -78,8 +74,8 @@ impl Reach {
                 patch
                     .polygon
                     .for_each_quadrature_point(1, |x, weight| quadrature.push((x, weight)));
-                // Also where viewers' corner values are read (`solution::gather_point`'s inset
-                // points): a corner of a sliver can lie inside a wall its quadrature points miss.
+                // Also where viewers' corner values are read: a corner of a sliver can lie
+                // inside a wall its quadrature points miss.
                 let insets = corner_insets(patch);
                 let unweighted = insets.iter().map(|&x| (x, 0.0));
                 let (mut share, mut buried, mut points) = (0.0, 0, 0);

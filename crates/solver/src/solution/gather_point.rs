@@ -2,7 +2,7 @@
 //! points around it that rays start from; and what each such point reads, as sparse weights.
 
 use crate::Progress;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, corner_reading_point};
 use crate::sampling::splitmix64;
 use crate::scene::Rgb;
 use glam::DVec3;
@@ -10,13 +10,6 @@ use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// How far a shadow ray's origin moves from a corner toward the centre of a patch that uses
-/// it, as a fraction of the distance. Visibility at a corner is so the mean over a small
-/// neighbourhood, not a point sample: a corner a hair's breadth inside a contact line that
-/// falls between lattice points would otherwise read fully dark while the probes just outside
-/// are lit (measured on the Cornell box: 0.25 lowers the smooth RMS at every knob; 1e-3 raises
-/// it at knob 0.05; 0.5 blurs penumbrae on the shadow slab).
-pub(super) const INSET: f64 = 0.25;
 /// Where the unoccluded factor is evaluated: this fraction of the way from the corner toward
 /// the centre of a patch that uses it. A corner on an edge shared with a perpendicular face
 /// lies in that face's plane, where the factor drops to zero; just inside, it has its limit.
@@ -29,9 +22,9 @@ pub(super) struct GatherPoint {
     pub(super) limit: DVec3,
     pub(super) normal: DVec3,
     pub(super) face: u32,
-    /// Up to four points, each [`INSET`] of the way into one patch that uses the corner (the
-    /// centroid itself for a centroid): rays start from them in turn, so a corner on a contact
-    /// line sees the mean of both sides.
+    /// Up to four points, one in each patch that uses the corner where its light is read
+    /// ([`corner_reading_point`]; the centroid itself for a centroid): rays start from them
+    /// in turn, so a corner on a contact line sees the mean of both sides.
     pub(super) insides: Vec<DVec3>,
 }
 
@@ -50,7 +43,9 @@ impl GatherPoint {
                     insides: Vec::new(),
                 });
                 if corner.insides.len() < 4 {
-                    corner.insides.push(inset(position, patch.centroid));
+                    corner
+                        .insides
+                        .push(corner_reading_point(position, patch.centroid));
                 }
             }
         }
@@ -129,11 +124,6 @@ impl<'a> Tally<'a> {
             });
         }
     }
-}
-
-/// The point a fraction [`INSET`] of the way from `corner` to `inside`.
-pub(super) fn inset(corner: DVec3, inside: DVec3) -> DVec3 {
-    corner + (inside - corner) * INSET
 }
 
 /// Per gather point, a list (point `i`'s is `entries[offsets[i]..offsets[i + 1]]`).

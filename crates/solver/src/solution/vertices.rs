@@ -18,10 +18,10 @@
 //! light's does. Everything is linear in each emitter's emission, so edits still superpose.
 
 use super::bounce::BounceLandings;
-use super::gather_point::{GatherPoint, GatheredAt, PointWeights, Tally, inset};
+use super::gather_point::{GatherPoint, GatheredAt, PointWeights, Tally};
 use crate::Progress;
 use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
-use crate::mesh::{Mesh, Patch};
+use crate::mesh::{Mesh, Patch, corner_reading_point};
 use crate::sampling::{Seed, SphericalPolygon, roberts_point, stratified_uv};
 use crate::scene::{Rgb, Scene};
 use crate::transport::Transport;
@@ -139,9 +139,9 @@ pub struct CornerLight {
     /// light land ([`BounceLandings`]), when they are gathered and so is direct light (the
     /// bounces read reflected light only; the direct light is the corners' own).
     bounce: Option<BounceLandings>,
-    /// Per patch and corner slot: whether light reaches the patch at the point
-    /// [`INSET`](super::gather_point::INSET) of the way in from that corner (not under a box
-    /// standing on the floor: [`Occluders::is_buried`]).
+    /// Per patch and corner slot: whether light reaches the patch where that corner's light
+    /// is read ([`corner_reading_point`]; not under a box standing on the floor:
+    /// [`Occluders::is_buried`]).
     reached: Vec<[bool; 4]>,
     /// The sample patterns its rays draw.
     seed: Seed,
@@ -204,7 +204,7 @@ impl CornerLight {
             .map(|(i, patch)| {
                 let mut reached = [true; 4];
                 for (slot, &c) in patch.corners[..patch.corner_count()].iter().enumerate() {
-                    let inside = inset(mesh.positions[c as usize], patch.centroid);
+                    let inside = corner_reading_point(mesh.positions[c as usize], patch.centroid);
                     let pattern = seed.pair(i, slot);
                     reached[slot] = !occluders.is_buried(inside, patch.normal, patch.face, pattern);
                 }
