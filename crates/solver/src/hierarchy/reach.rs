@@ -34,7 +34,7 @@ const CROSSING_LIFT: f64 = 1e-3;
 /// The points of `patch` where viewers' corner values are read
 /// ([`corner_reading_point`], toward the centroid).
 fn corner_insets(patch: &Patch) -> Vec<DVec3> {
-    let centroid = patch.polygon.centroid();
+    let centroid = patch.centroid;
     (patch.polygon.corners().iter())
         .map(|&c| corner_reading_point(c, centroid))
         .collect()
@@ -46,7 +46,7 @@ fn corner_insets(patch: &Patch) -> Vec<DVec3> {
 /// missed, or a contact line, where light changes at once.
 fn a_face_crosses(patch: &Patch, insets: &[DVec3], radius: f64, occluders: &Occluders) -> bool {
     let lift = patch.normal * (radius * CROSSING_LIFT);
-    let centroid = patch.polygon.centroid() + lift;
+    let centroid = patch.centroid + lift;
     let own = [patch.face, patch.face];
     (0..insets.len()).any(|k| {
         let (inset, next) = (insets[k] + lift, insets[(k + 1) % insets.len()] + lift);
