@@ -17,10 +17,34 @@ pub(super) struct Slope {
     child_weights: [[f64; 2]; 4],
     /// The node's centroid from the centre, in the tangent frame.
     shift: [f64; 2],
-    /// How far from the centre the model is read, per axis: half the children's reach. On a
-    /// quad of four equal children that keeps every reading a convex mix of their
-    /// (non-negative) means, so no link carries negative light.
+    /// How far from the centre the model is read, per axis: half the children's reach, less
+    /// where a reading there would not be a convex mix of their (non-negative) means
+    /// ([`Slope::read_as_a_mix`]), so that no link carries negative light or amplifies it.
     reach: [f64; 2],
+}
+
+impl Slope {
+    /// This slope with its reach shrunk, where it must be, so that every reading is a convex
+    /// mix of the children's means (`shares`: each child's share of the reached area, which
+    /// weighs its mean in the node's). A reading at `p` weighs child `k` by
+    /// `share_k + p . child_weights_k`, linear in `p`, so the reach's corners decide. A fit over
+    /// children that are nearly in a row, or of very different reached areas, has a steep
+    /// slope across them; read out to the reach there, it extrapolated and made the links'
+    /// operator amplify light (a real model's faces cut where others cross them: GMRES's
+    /// residual grew to 1e9, docs/BENCHMARKS.md).
+    fn read_as_a_mix(mut self, shares: impl Iterator<Item = f64>) -> Slope {
+        let mut scale = 1.0f64;
+        for (share, weights) in shares.zip(&self.child_weights) {
+            for corner in [[1.0, 1.0], [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0]] {
+                let lean: f64 = (0..2).map(|k| corner[k] * self.reach[k] * weights[k]).sum();
+                if share + scale * lean < 0.0 {
+                    scale = share / -lean;
+                }
+            }
+        }
+        self.reach = self.reach.map(|r| r * scale.max(0.0));
+        self
+    }
 }
 
 /// One link as its receiver reads it: what the gather loop walks.
@@ -87,65 +111,73 @@ impl Hierarchy {
 
     /// The weighted least-squares slope of each element node's children's means (weights: their
     /// reached area), as weights on those means; zero for leaves, clusters and degenerate fits.
+    /// Read only where it is a convex mix of the children's means ([`Slope::read_as_a_mix`]).
     pub(super) fn fit_slopes(&mut self) {
         self.slopes = (0..self.tree.nodes.len())
             .into_par_iter()
             .map(|n| {
-                let node = &self.tree.nodes[n];
-                let (Some(element), true) = (&node.element, self.reach.seen_area[n] > 0.0) else {
-                    return Slope::default();
-                };
-                let (tangent, bitangent) = element.patch.normal.any_orthonormal_pair();
-                let frame = |p: DVec3| [p.dot(tangent), p.dot(bitangent)];
-                let children: Vec<(f64, DVec3)> = node
+                let shares = self.tree.nodes[n]
                     .children()
-                    .map(|c| {
-                        (
-                            self.reach.seen_area[c as usize],
-                            self.tree.nodes[c as usize].centroid,
-                        )
-                    })
-                    .collect();
-                let mean_centre =
-                    children.iter().map(|(w, c)| *c * *w).sum::<DVec3>() / self.reach.seen_area[n];
-                let offsets: Vec<[f64; 2]> = children
-                    .iter()
-                    .map(|(_, c)| frame(*c - mean_centre))
-                    .collect();
-                let (mut m00, mut m01, mut m11) = (0.0, 0.0, 0.0);
-                for ((w, _), d) in children.iter().zip(&offsets) {
-                    (m00, m01, m11) = (
-                        m00 + w * d[0] * d[0],
-                        m01 + w * d[0] * d[1],
-                        m11 + w * d[1] * d[1],
-                    );
-                }
-                let determinant = m00 * m11 - m01 * m01;
-                if m00 + m11 <= 0.0 {
-                    return Slope::default();
-                }
-                if determinant <= 1e-9 * (m00 + m11) * (m00 + m11) {
-                    let shift = frame(node.centroid - mean_centre);
-                    let weights = children.iter().map(|(w, _)| *w);
-                    return slope_along_a_row(weights.zip(offsets), [m00, m01, m11], shift);
-                }
-                let reach =
-                    [0, 1].map(|k| 0.5 * offsets.iter().map(|d| d[k].abs()).fold(0.0, f64::max));
-                let mut slope = Slope {
-                    shift: frame(node.centroid - mean_centre),
-                    reach,
-                    ..Slope::default()
-                };
-                for (k, ((w, _), d)) in children.iter().zip(&offsets).enumerate() {
-                    // (M^-1 w d): the slope is linear in the children's means.
-                    slope.child_weights[k] = [
-                        w * (m11 * d[0] - m01 * d[1]) / determinant,
-                        w * (m00 * d[1] - m01 * d[0]) / determinant,
-                    ];
-                }
-                slope
+                    .map(|c| self.reach.seen_area[c as usize] / self.reach.seen_area[n]);
+                self.fit_slope(n).read_as_a_mix(shares)
             })
             .collect();
+    }
+
+    /// [`Hierarchy::fit_slopes`] for node `n`, before its reach is bounded.
+    fn fit_slope(&self, n: usize) -> Slope {
+        let node = &self.tree.nodes[n];
+        let (Some(element), true) = (&node.element, self.reach.seen_area[n] > 0.0) else {
+            return Slope::default();
+        };
+        let (tangent, bitangent) = element.patch.normal.any_orthonormal_pair();
+        let frame = |p: DVec3| [p.dot(tangent), p.dot(bitangent)];
+        let children: Vec<(f64, DVec3)> = node
+            .children()
+            .map(|c| {
+                (
+                    self.reach.seen_area[c as usize],
+                    self.tree.nodes[c as usize].centroid,
+                )
+            })
+            .collect();
+        let mean_centre =
+            children.iter().map(|(w, c)| *c * *w).sum::<DVec3>() / self.reach.seen_area[n];
+        let offsets: Vec<[f64; 2]> = children
+            .iter()
+            .map(|(_, c)| frame(*c - mean_centre))
+            .collect();
+        let (mut m00, mut m01, mut m11) = (0.0, 0.0, 0.0);
+        for ((w, _), d) in children.iter().zip(&offsets) {
+            (m00, m01, m11) = (
+                m00 + w * d[0] * d[0],
+                m01 + w * d[0] * d[1],
+                m11 + w * d[1] * d[1],
+            );
+        }
+        let determinant = m00 * m11 - m01 * m01;
+        if m00 + m11 <= 0.0 {
+            return Slope::default();
+        }
+        if determinant <= 1e-9 * (m00 + m11) * (m00 + m11) {
+            let shift = frame(node.centroid - mean_centre);
+            let weights = children.iter().map(|(w, _)| *w);
+            return slope_along_a_row(weights.zip(offsets), [m00, m01, m11], shift);
+        }
+        let reach = [0, 1].map(|k| 0.5 * offsets.iter().map(|d| d[k].abs()).fold(0.0, f64::max));
+        let mut slope = Slope {
+            shift: frame(node.centroid - mean_centre),
+            reach,
+            ..Slope::default()
+        };
+        for (k, ((w, _), d)) in children.iter().zip(&offsets).enumerate() {
+            // (M^-1 w d): the slope is linear in the children's means.
+            slope.child_weights[k] = [
+                w * (m11 * d[0] - m01 * d[1]) / determinant,
+                w * (m00 * d[1] - m01 * d[0]) / determinant,
+            ];
+        }
+        slope
     }
 
     /// Groups the links by receiver and measures each leaf's row sum: a leaf of a face whose
@@ -281,6 +313,7 @@ mod tests {
     use crate::scene::Rgb;
     use crate::scene::Scene;
     use crate::visibility::Occluders;
+    use glam::dvec3;
 
     #[test]
     fn rows_of_a_closed_box_sum_to_one_before_normalisation() {
@@ -330,6 +363,44 @@ mod tests {
             // the box's top: 11% at worst); before, the floor beside the box was 32% short.
             assert!(worst < 0.15, "error {error}: worst row sum off by {worst}");
         }
+    }
+
+    #[test]
+    fn every_slope_is_read_as_a_mix_of_its_childrens_means() {
+        // Beside and under a box standing on a floor, the floor's children are reached
+        // unevenly, and the triangles of a slanted roof split into children whose centres
+        // do not sit on the axes: a reading anywhere in a slope's reach must weigh every child
+        // by at least zero (the weights sum to one by construction).
+        let mut roof = room_with_a_box();
+        let a = roof.add_object("roof");
+        let (p, q, r) = (
+            dvec3(0.0, 3.0, 0.0),
+            dvec3(4.0, 3.5, 0.3),
+            dvec3(1.0, 3.2, 4.0),
+        );
+        roof.add_polygon(a, &[p, r, q], GREY);
+        let mut checked = 0;
+        for scene in [floor_cut_by_a_box(0.37), roof] {
+            let hierarchy = build(&scene, 0.05);
+            for (n, slope) in hierarchy.slopes.iter().enumerate() {
+                let node = &hierarchy.tree.nodes[n];
+                if slope.child_weights.iter().all(|w| *w == [0.0; 2]) {
+                    continue;
+                }
+                checked += 1;
+                let reached = hierarchy.reach.seen_area[n];
+                for (c, weights) in node.children().zip(&slope.child_weights) {
+                    let share = hierarchy.reach.seen_area[c as usize] / reached;
+                    for corner in [[1.0, 1.0], [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0]] {
+                        let lean: f64 = (0..2)
+                            .map(|k| corner[k] * slope.reach[k] * weights[k])
+                            .sum();
+                        assert!(share + lean >= -1e-12, "node {n}: {share} + {lean}");
+                    }
+                }
+            }
+        }
+        assert!(checked > 10, "{checked} slopes");
     }
 
     #[test]
