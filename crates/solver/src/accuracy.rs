@@ -6,13 +6,12 @@
 //! Only probes on non-emitting faces count: an emitter's own emission is exact and would
 //! swamp the comparison.
 
-use crate::geometry::fan_weights;
 use crate::mesh::Mesh;
 use crate::reference::Probe;
 use crate::scene::{Rgb, Scene};
+use crate::solution::locator::{PatchLocator, Place, fan_corners};
 use glam::DVec3;
 use serde::Serialize;
-use std::ops::Range;
 
 /// Errors of one reading, all relative.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
@@ -89,43 +88,41 @@ struct Located {
     smooth: Rgb,
 }
 
-fn locate(mesh: &Mesh, corners: &[Rgb], faces: &[Range<usize>], probe: &Probe) -> Located {
+/// Where `probe` falls: of the patches of its face's pieces, the fan triangle that holds it
+/// best (the largest smallest barycentric weight; inside when it is at least zero).
+fn locate(
+    (mesh, locator): (&Mesh, &PatchLocator),
+    pieces: &[Vec<u32>],
+    corners: &[Rgb],
+    probe: &Probe,
+) -> Located {
     let p = DVec3::from(probe.position);
-    // The fan triangle that holds p best: the largest smallest barycentric (inside when >= 0).
-    let mut best = (f64::NEG_INFINITY, 0, Rgb::ZERO);
-    for index in faces[probe.face as usize].clone() {
-        let patch = &mesh.patches[index];
-        let ids = &patch.corners[..patch.corner_count()];
-        let positions: Vec<DVec3> = ids.iter().map(|&c| mesh.positions[c as usize]).collect();
-        let (k, weights, inside) = fan_weights(&positions, p);
-        if inside > best.0 {
-            let triangle = [ids[0], ids[k], ids[k + 1]];
-            let smooth = (0..3)
-                .map(|i| corners[triangle[i] as usize] * weights[i])
-                .sum();
-            best = (inside, index, smooth);
-        }
-    }
+    let inside = |place: &Place| place.weights.iter().copied().fold(f64::INFINITY, f64::min);
+    let best = (pieces.get(probe.face as usize).into_iter().flatten())
+        .filter_map(|&piece| locator.place(piece, p))
+        .max_by(|a, b| inside(a).total_cmp(&inside(b)));
+    let Some(place) = best else {
+        return Located {
+            patch: 0,
+            smooth: Rgb::ZERO,
+        };
+    };
+    let triangle = fan_corners(&mesh.patches[place.patch], place.fan);
     Located {
-        patch: best.1,
-        smooth: best.2,
+        patch: place.patch,
+        smooth: (0..3)
+            .map(|i| corners[triangle[i] as usize] * place.weights[i])
+            .sum(),
     }
 }
 
-/// Patches of each face of the scene file ([`crate::scene::Face::source`]), as index ranges
-/// ([`Mesh::build`] meshes face by face, and the pieces of one source face follow each other).
-fn face_ranges(scene: &Scene, mesh: &Mesh) -> Vec<Range<usize>> {
-    // `end == 0` marks a face not seen yet: a real range ends at 1 or later.
-    let mut ranges = vec![0..0; scene.source_face_count()];
-    for (i, patch) in mesh.patches.iter().enumerate() {
-        let range = &mut ranges[scene.faces[patch.face as usize].source as usize];
-        if range.end == 0 {
-            *range = i..i + 1;
-        } else {
-            range.end = i + 1;
-        }
+/// The scene faces each face of the scene file was cut into ([`crate::scene::Face::source`]).
+fn pieces_by_source(scene: &Scene) -> Vec<Vec<u32>> {
+    let mut pieces = vec![Vec::new(); scene.source_face_count()];
+    for (index, face) in scene.faces.iter().enumerate() {
+        pieces[face.source as usize].push(index as u32);
     }
-    ranges
+    pieces
 }
 
 /// The errors of (solution, reference) `pairs`.
@@ -259,9 +256,13 @@ pub(crate) fn read_at(
     corners: &[Rgb],
     probes: &[Probe],
 ) -> Readings {
-    let faces = face_ranges(scene, mesh);
+    let (locator, pieces) = (
+        PatchLocator::new(mesh, scene.faces.len()),
+        pieces_by_source(scene),
+    );
     // The pieces of a source face share its material: any of them tells whether it emits.
-    let (mut source_emits, mut source_object) = (vec![None; faces.len()], vec![0; faces.len()]);
+    let sources = pieces.len();
+    let (mut source_emits, mut source_object) = (vec![None; sources], vec![0; sources]);
     for face in &scene.faces {
         source_emits[face.source as usize] = Some(face.emission != Rgb::ZERO);
         source_object[face.source as usize] = face.object;
@@ -273,7 +274,7 @@ pub(crate) fn read_at(
     let (mut flat, mut smooth) = (Vec::new(), Vec::new());
     for probe in &counted {
         let reference = Rgb::from(probe.radiosity);
-        let located = locate(mesh, corners, &faces, probe);
+        let located = locate((mesh, &locator), &pieces, corners, probe);
         flat.push((radiosity[located.patch], reference));
         smooth.push((located.smooth, reference));
     }

@@ -338,35 +338,6 @@ fn angle_from(sine: f64, cosine: f64) -> f64 {
     }
 }
 
-/// Where `x` (in the polygon's plane) falls among the fan triangles `(c0, ck, ck+1)` over
-/// `corners`, as viewers interpolate: the `k` of the triangle that holds it best (the largest
-/// smallest barycentric coordinate, non-negative inside), its barycentric weights for
-/// `(c0, ck, ck+1)`, and that smallest coordinate.
-pub fn fan_weights(corners: &[DVec3], x: DVec3) -> (usize, [f64; 3], f64) {
-    let mut best = (1, [1.0, 0.0, 0.0], f64::NEG_INFINITY);
-    for k in 1..corners.len() - 1 {
-        let weights = barycentric(x, corners[0], corners[k], corners[k + 1]);
-        let inside = weights.iter().copied().fold(f64::INFINITY, f64::min);
-        if inside > best.2 {
-            best = (k, weights, inside);
-        }
-    }
-    best
-}
-
-/// Barycentric coordinates of `p` (in the plane) in triangle `a, b, c`.
-fn barycentric(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
-    let (v0, v1, v2) = (b - a, c - a, p - a);
-    let (d00, d01, d11, d20, d21) = (v0.dot(v0), v0.dot(v1), v1.dot(v1), v2.dot(v0), v2.dot(v1));
-    let denominator = d00 * d11 - d01 * d01;
-    if denominator == 0.0 {
-        return [1.0, 0.0, 0.0];
-    }
-    let v = (d11 * d20 - d01 * d21) / denominator;
-    let w = (d00 * d21 - d01 * d20) / denominator;
-    [1.0 - v - w, v, w]
-}
-
 /// Sutherland-Hodgman clip of `polygon` to the half-space in front of the plane through `origin`
 /// with normal `normal`; writes the result to `out` and returns its corner count.
 fn clip_above_plane(

@@ -1,5 +1,6 @@
 //! Which patch of a mesh holds a point of a scene face, and where in it: what a ray that meets
-//! the face sees of a solution (its corners' values interpolated as viewers show them).
+//! the face sees of a solution (its corners' values interpolated as viewers show them), and
+//! what a probe of [`crate::accuracy`] reads there.
 //!
 //! The bounce's rays ask this tens of millions of times on a large model, so each face keeps
 //! its patches' fan triangles in its own plane, side by side in memory, each as the affine map
@@ -17,14 +18,14 @@ const SCANNED_TRIANGLES: usize = 16;
 /// A point's place in the mesh: its patch, the fan triangle `(c0, ck, ck+1)` of it that holds
 /// the point (`fan` is `k`), and the interpolation weights of that triangle's corners.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) struct Place {
-    pub(super) patch: usize,
-    pub(super) fan: usize,
-    pub(super) weights: [f64; 3],
+pub(crate) struct Place {
+    pub(crate) patch: usize,
+    pub(crate) fan: usize,
+    pub(crate) weights: [f64; 3],
 }
 
 /// The corners of `patch`'s fan triangle `(c0, ck, ck+1)`, `k` = `fan`.
-pub(super) fn fan_corners(patch: &Patch, fan: usize) -> [u32; 3] {
+pub(crate) fn fan_corners(patch: &Patch, fan: usize) -> [u32; 3] {
     [patch.corners[0], patch.corners[fan], patch.corners[fan + 1]]
 }
 
@@ -157,7 +158,7 @@ impl FaceIndex {
 }
 
 /// Point location on a mesh built face by face.
-pub(super) struct PatchLocator {
+pub(crate) struct PatchLocator {
     /// Per scene face; `None` for a face with no patch.
     faces: Vec<Option<FaceIndex>>,
     triangles: Vec<FanTriangle>,
@@ -165,7 +166,7 @@ pub(super) struct PatchLocator {
 
 impl PatchLocator {
     /// Indexes `mesh`, whose patches come face by face, for `face_count` scene faces.
-    pub(super) fn new(mesh: &Mesh, face_count: usize) -> PatchLocator {
+    pub(crate) fn new(mesh: &Mesh, face_count: usize) -> PatchLocator {
         // `end == 0` marks a face not met yet: a real range ends at 1 or later.
         let mut ranges = vec![0..0; face_count];
         for (i, patch) in mesh.patches.iter().enumerate() {
@@ -214,7 +215,7 @@ impl PatchLocator {
 
     /// Where `x`, a point of scene face `face`, lies in the mesh: the fan triangle that holds
     /// it best (the largest smallest barycentric weight). `None` for a face with no patch.
-    pub(super) fn place(&self, face: u32, x: DVec3) -> Option<Place> {
+    pub(crate) fn place(&self, face: u32, x: DVec3) -> Option<Place> {
         let index = self.faces.get(face as usize)?.as_ref()?;
         let p = index.in_plane(x);
         let mut best: Option<(f64, u32, [f64; 3])> = None;

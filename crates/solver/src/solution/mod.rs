@@ -6,7 +6,7 @@
 mod bounce;
 mod display;
 mod gather_point;
-mod locator;
+pub(crate) mod locator;
 pub mod pipeline;
 pub mod report;
 pub mod request;
