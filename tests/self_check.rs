@@ -34,6 +34,7 @@ fn the_estimate_recovers_a_known_error_within_its_interval_for_every_seed() {
                 &solved.mesh,
                 (radiosity, corners),
                 &settings,
+                &solver::no_progress,
             )
         };
         let right = check(&solved.radiosity, &solved.vertex_radiosity);
@@ -73,6 +74,46 @@ fn the_estimate_recovers_a_known_error_within_its_interval_for_every_seed() {
         );
         assert_eq!(off.probes, 256);
     }
+}
+
+#[test]
+fn the_check_shows_its_probes_as_it_traces_them_and_stops_within_its_time() {
+    let request = SolveRequest {
+        patches: PatchTarget::Count(100),
+        ..SolveRequest::default()
+    };
+    let scene = parallel_plates(1.0, 1.0, 1.0, grey(0.6, 0.0), grey(0.0, 10.0));
+    let solved = solve_scene(scene, &request, &solver::no_progress).expect("solves");
+    let occluders = Occluders::new(&solved.scene);
+    let check = |settings: &CheckSettings| {
+        let shown = std::sync::Mutex::new(Vec::new());
+        let estimate = self_check(
+            &solved.scene,
+            &occluders,
+            &solved.mesh,
+            (&solved.radiosity, &solved.vertex_radiosity),
+            settings,
+            &|p| shown.lock().unwrap().extend(p.describe()),
+        );
+        (estimate, shown.into_inner().unwrap())
+    };
+    // With no time limit, every probe, the count shown reaching them all.
+    let (all, shown) = check(&CheckSettings::default());
+    assert_eq!(all.probes, 256);
+    assert!(
+        shown.iter().all(|line| line.starts_with("self-check: ")),
+        "{shown:?}"
+    );
+    assert!(
+        shown.contains(&"self-check: 256 of 256 probes".to_string()),
+        "{shown:?}"
+    );
+    // With none to spare, only the first ones: the time is looked at between chunks.
+    let hurried = CheckSettings {
+        seconds: Some(0.0),
+        ..CheckSettings::default()
+    };
+    assert_eq!(check(&hurried).0.probes, solver::check::FIRST_PROBES);
 }
 
 /// `--target-error` on the Cornell box, both ways: a hierarchy refined from where it is (each

@@ -108,7 +108,7 @@ impl ProgressPrinter {
 /// stage's own line beside a spinner.
 fn draw(bar: &ProgressBar, progress: &Progress) {
     match *progress {
-        Progress::FormFactors { done, total } | Progress::Probes { done, total } => {
+        Progress::FormFactors { done, total } | Progress::Probes { done, total, .. } => {
             bar.set_length(total as u64);
             bar.set_position(done as u64);
         }

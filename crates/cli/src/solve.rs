@@ -49,8 +49,6 @@ impl SolveCommand {
             })
             .transpose()?;
         let mut solved = solve_file(&scene, &request, &|p| printer.report(p))?;
-        // The bar goes before the summary is printed.
-        drop(printer);
         let measured = reference.map(|r| {
             evaluate(
                 &solved.scene,
@@ -68,8 +66,11 @@ impl SolveCommand {
                 &solved.mesh,
                 (&solved.radiosity, &solved.vertex_radiosity),
                 &CheckSettings::after_solve(solved.report.seconds.total),
+                &|p| printer.report(p),
             ));
         }
+        // The bar goes before the summary is printed.
+        drop(printer);
         let report = &solved.report;
         print_warnings(&scene, &request, report);
         if json {

@@ -67,8 +67,10 @@ pub enum Progress<'a> {
         /// Rows in all.
         total: usize,
     },
-    /// Reference probes finished out of total.
+    /// Path-traced probes finished out of total.
     Probes {
+        /// What the probes are for: a reference, or the self-check.
+        purpose: &'a str,
         /// Probes finished.
         done: usize,
         /// Probes in all.
@@ -157,7 +159,11 @@ impl Progress<'_> {
             Progress::FormFactors { done, total } => {
                 format!("form factors {:5.1}%", percent(done, total))
             }
-            Progress::Probes { done, total } => format!("reference: {done} of {total} probes"),
+            Progress::Probes {
+                purpose,
+                done,
+                total,
+            } => format!("{purpose}: {done} of {total} probes"),
             Progress::Gathering { pass, done, total } => {
                 format!("vertex light: {pass} at {done} of {total} points")
             }

@@ -214,6 +214,7 @@ pub fn trace_probes(
             let variance = ((sum_sq / n - mean * mean) * (n / (n - 1.0).max(1.0))).max(Rgb::ZERO);
             let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
             progress(Progress::Probes {
+                purpose: "reference",
                 done: finished,
                 total: probes.len(),
             });

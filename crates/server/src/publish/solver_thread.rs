@@ -437,7 +437,10 @@ fn apply_moves(
 /// The self-check of `session`'s answer after a solve of `solve_seconds`, logged, its
 /// verdict in [`Fault::Inaccurate`].
 fn check(session: &Session, shared: &Shared, solve_seconds: f64) -> Estimate {
-    let estimate = session.self_check(&CheckSettings::after_solve(solve_seconds));
+    let estimate = session.self_check(
+        &CheckSettings::after_solve(solve_seconds),
+        &solver::no_progress,
+    );
     tracing::info!(
         smooth_rms = estimate.smooth.rms,
         smooth_low = estimate.smooth.low,

@@ -245,6 +245,7 @@ mod tests {
                 &solved.mesh,
                 (&solved.radiosity, &solved.vertex_radiosity),
                 &solver::check::CheckSettings::after_solve(0.0),
+                &solver::no_progress,
             ));
             let printed = serde_json::to_value(&report).expect("the report serialises");
             let served = serde_json::to_value(report_for_viewers(&report)).expect("serialises");

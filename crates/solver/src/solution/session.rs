@@ -388,7 +388,11 @@ impl Session {
     }
 
     /// The self-check of the current answer ([`crate::check`]), traced in the scene as edited.
-    pub fn self_check(&self, settings: &CheckSettings) -> Estimate {
+    pub fn self_check(
+        &self,
+        settings: &CheckSettings,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Estimate {
         let lit = self.edited_scene();
         crate::check::self_check(
             &lit,
@@ -396,6 +400,7 @@ impl Session {
             &self.mesh,
             (&self.radiosity, &self.vertex_radiosity()),
             settings,
+            progress,
         )
     }
 
@@ -996,13 +1001,13 @@ mod tests {
         let mut live = session(&scene);
         live.solve(&no_progress);
         let settings = CheckSettings::after_solve(0.0);
-        let before = live.self_check(&settings).smooth.rms;
+        let before = live.self_check(&settings, &crate::no_progress).smooth.rms;
         live.set_emission("floor", Rgb::new(0.5, 0.25, 0.0))
             .unwrap();
         live.set_emission("ceiling", Rgb::new(0.0, 1.0, 0.5))
             .unwrap();
         live.solve(&no_progress);
-        let after = live.self_check(&settings).smooth.rms;
+        let after = live.self_check(&settings, &crate::no_progress).smooth.rms;
         assert!((after - before).abs() < 0.01, "{before} -> {after}");
     }
 

@@ -72,7 +72,10 @@ impl Run<'_> {
     ) -> (SolveReport, Option<&'static str>) {
         let mut report = session.solve(self.progress);
         (self.on_step)(session);
-        let estimate = session.self_check(&CheckSettings::after_solve(report.seconds.total));
+        let estimate = session.self_check(
+            &CheckSettings::after_solve(report.seconds.total),
+            self.progress,
+        );
         report.estimate = Some(estimate);
         // The knob refinement ended at: coarser than asked where a budget made it so.
         let knob = knob.map(|k| report.hierarchy.map_or(k, |h| h.knob_used));
