@@ -133,10 +133,10 @@ pub fn self_check(
     let started = std::time::Instant::now();
     let placed = place_probes(scene, settings.probes, settings.seed);
     let total = placed.len();
-    // The first probes always, then chunks while the time allows. Each chunk's paths have a
-    // seed of their own (the tracer seeds each probe by its index in the list it is given).
-    // Extrapolated from the first probes' pace, the monastery's check took 5.4 s for a share
-    // of 3 s: the first probes' paths were shorter than the rest's.
+    // The first probes always, then chunks while the time allows: the clock, not a count
+    // extrapolated from the first probes' pace (whose paths may be shorter than the rest's),
+    // says when to stop. Each chunk's paths have a seed of their own (the tracer seeds each
+    // probe by its index in the list it is given).
     let mut probes = Vec::with_capacity(total);
     let mut start = 0;
     while start < total {
