@@ -1001,13 +1001,13 @@ mod tests {
         let mut live = session(&scene);
         live.solve(&no_progress);
         let settings = CheckSettings::after_solve(0.0);
-        let before = live.self_check(&settings, &crate::no_progress).smooth.rms;
+        let before = live.self_check(&settings, &no_progress).smooth.rms;
         live.set_emission("floor", Rgb::new(0.5, 0.25, 0.0))
             .unwrap();
         live.set_emission("ceiling", Rgb::new(0.0, 1.0, 0.5))
             .unwrap();
         live.solve(&no_progress);
-        let after = live.self_check(&settings, &crate::no_progress).smooth.rms;
+        let after = live.self_check(&settings, &no_progress).smooth.rms;
         assert!((after - before).abs() < 0.01, "{before} -> {after}");
     }
 
