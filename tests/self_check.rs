@@ -6,17 +6,24 @@ mod common;
 use common::*;
 use solver::check::{CheckSettings, self_check};
 use solver::visibility::Occluders;
-use solver::{PatchTarget, Rgb, SolveRequest, solve_scene};
+use solver::{PatchTarget, Rgb, SolveRequest, Solved, solve_scene};
 
-#[test]
-fn the_estimate_recovers_a_known_error_within_its_interval_for_every_seed() {
+/// The plates (a grey one under a lamp one) solved densely on `patches` patches, and their
+/// occluders.
+fn solved_plates(patches: usize) -> (Solved, Occluders) {
     let request = SolveRequest {
-        patches: PatchTarget::Count(400),
+        patches: PatchTarget::Count(patches),
         ..SolveRequest::default()
     };
     let scene = parallel_plates(1.0, 1.0, 1.0, grey(0.6, 0.0), grey(0.0, 10.0));
     let solved = solve_scene(scene, &request, &solver::no_progress).expect("solves");
     let occluders = Occluders::new(&solved.scene);
+    (solved, occluders)
+}
+
+#[test]
+fn the_estimate_recovers_a_known_error_within_its_interval_for_every_seed() {
+    let (solved, occluders) = solved_plates(400);
     let brighter = |values: &[Rgb]| values.iter().map(|b| *b * 1.1).collect::<Vec<_>>();
     let (flat, smooth) = (
         brighter(&solved.radiosity),
@@ -78,13 +85,7 @@ fn the_estimate_recovers_a_known_error_within_its_interval_for_every_seed() {
 
 #[test]
 fn the_check_shows_its_probes_as_it_traces_them_and_stops_within_its_time() {
-    let request = SolveRequest {
-        patches: PatchTarget::Count(100),
-        ..SolveRequest::default()
-    };
-    let scene = parallel_plates(1.0, 1.0, 1.0, grey(0.6, 0.0), grey(0.0, 10.0));
-    let solved = solve_scene(scene, &request, &solver::no_progress).expect("solves");
-    let occluders = Occluders::new(&solved.scene);
+    let (solved, occluders) = solved_plates(100);
     let check = |settings: &CheckSettings| {
         let shown = std::sync::Mutex::new(Vec::new());
         let estimate = self_check(
