@@ -12,9 +12,10 @@
 //! piece stays convex and the cuts stay near the contacts. The pieces keep the face's
 //! material, object and orientation and name it as their source ([`Face::source`]).
 
-use crate::geometry::{bounds, convex_pieces};
+use crate::geometry::{Polygon, bounds, convex_pieces};
 use crate::scene::{Face, Scene};
 use glam::DVec3;
+use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// Distances below this fraction of a face's radius count as zero: an edge this close to a
@@ -41,34 +42,41 @@ pub(crate) fn split_at_contacts(scene: &mut Scene) {
 }
 
 /// `faces` with every face cut along the contact segments of the faces that stand on it, and
-/// how many faces were cut. Pieces of one face follow one another, in the face's place.
+/// how many faces were cut. Pieces of one face follow one another, in the face's place. Faces
+/// are cut in parallel (on the 125k-triangle monastery the cuts were most of its serial load).
 fn split_faces_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
     let grid = EdgeGrid::new(&faces);
-    let mut split = Vec::with_capacity(faces.len());
-    let mut cut = 0;
-    for (index, face) in faces.iter().enumerate() {
-        let segments = contact_segments(&faces, index, &grid);
-        let mut pieces = cut_locally(
-            face.polygon.corners().to_vec(),
-            face.polygon.normal(),
-            &segments,
-            0,
-        );
-        // A bound whatever the input: past it the face stays whole, as before contact lines.
-        if pieces.len() > MAX_PIECES_PER_SEGMENT * segments.len() {
-            pieces = vec![face.polygon.corners().to_vec()];
-        }
-        if pieces.len() > 1 {
-            cut += 1;
-        }
-        for piece in pieces {
-            for polygon in convex_pieces(&without_straight_corners(piece)) {
-                split.push(Face {
-                    polygon,
-                    ..face.clone()
-                });
+    let cut_faces: Vec<(Vec<Polygon>, bool)> = (0..faces.len())
+        .into_par_iter()
+        .map(|index| {
+            let face = &faces[index];
+            let segments = contact_segments(&faces, index, &grid);
+            let mut pieces = cut_locally(
+                face.polygon.corners().to_vec(),
+                face.polygon.normal(),
+                &segments,
+                0,
+            );
+            // A bound whatever the input: past it the face stays whole, as before contact
+            // lines.
+            if pieces.len() > MAX_PIECES_PER_SEGMENT * segments.len() {
+                pieces = vec![face.polygon.corners().to_vec()];
             }
-        }
+            let cut = pieces.len() > 1;
+            let convex = pieces
+                .into_iter()
+                .flat_map(|piece| convex_pieces(&without_straight_corners(piece)))
+                .collect();
+            (convex, cut)
+        })
+        .collect();
+    let cut = cut_faces.iter().filter(|(_, cut)| *cut).count();
+    let mut split = Vec::with_capacity(faces.len());
+    for (face, (pieces, _)) in faces.iter().zip(cut_faces) {
+        split.extend(pieces.into_iter().map(|polygon| Face {
+            polygon,
+            ..face.clone()
+        }));
     }
     (split, cut)
 }
