@@ -220,8 +220,10 @@ impl Hierarchy {
     /// The leaves as a mesh: face by face, corners shared between the leaves of a face, but
     /// not across the edge of where light reaches ([`tree::Tree::leaf_mesh`]).
     pub fn leaf_mesh(&self) -> Mesh {
-        self.tree
-            .leaf_mesh(|leaf| self.reach.seen_share[leaf as usize] == 0.0)
+        self.tree.leaf_mesh(|leaf, corner| {
+            self.reach.seen_share[leaf as usize] == 0.0
+                || self.reach.buried_corners[leaf as usize][corner]
+        })
     }
 
     /// What refinement and solving cost so far.

@@ -1,5 +1,5 @@
-//! Where light can reach: a leaf point is buried when every cosine ray from it meets the back
-//! of a face (under a box on the floor, inside a wall that cuts through it). Sources send their
+//! Where light can reach: a leaf point is buried when (all but one of) the cosine rays from it
+//! meet the back of a face (under a box on the floor, inside a wall that cuts through it). Sources send their
 //! mean over the reached area, errors are measured against the mean over it, what an element
 //! gathers is pushed down to its reached parts only, and leaves whose points disagree, or that
 //! a face crosses between them, straddle the edge of the reach (refinement splits them).
@@ -25,6 +25,9 @@ pub(super) struct Reach {
     /// Per node ever a leaf, whether some of its points are buried and some reached: it
     /// straddles the edge of where light reaches.
     pub(super) straddles: Vec<bool>,
+    /// Per node ever a leaf, whether each corner's reading point ([`corner_insets`]) is
+    /// buried: viewers' corner values on either side of where light reaches are kept apart.
+    pub(super) buried_corners: Vec<[bool; 4]>,
 }
 
 /// How far above a leaf the segments that look for a face crossing it run, as a fraction of
@@ -66,7 +69,8 @@ impl Reach {
             .filter(|&n| self.seen_share[n as usize].is_nan())
             .collect();
         self.straddles.resize(tree.nodes.len(), false);
-        let measured: Vec<(f64, bool)> = unmeasured
+        self.buried_corners.resize(tree.nodes.len(), [false; 4]);
+        let measured: Vec<(f64, bool, [bool; 4])> = unmeasured
             .par_iter()
             .map(|&n| {
                 let patch = tree.element_patch(n);
@@ -78,12 +82,17 @@ impl Reach {
                 // inside a wall its quadrature points miss.
                 let insets = corner_insets(patch);
                 let unweighted = insets.iter().map(|&x| (x, 0.0));
+                let first_inset = quadrature.len();
                 let (mut share, mut buried, mut points) = (0.0, 0, 0);
+                let mut buried_corners = [false; 4];
                 for (k, (x, weight)) in quadrature.into_iter().chain(unweighted).enumerate() {
                     points += 1;
                     let seed = pair_seed(n as usize, k + 1);
                     if occluders.is_buried(x, patch.normal, patch.face, seed) {
                         buried += 1;
+                        if let Some(corner) = k.checked_sub(first_inset) {
+                            buried_corners[corner] = true;
+                        }
                     } else {
                         share += weight;
                     }
@@ -95,12 +104,13 @@ impl Reach {
                 } else {
                     buried < points
                 };
-                (share, straddles)
+                (share, straddles, buried_corners)
             })
             .collect();
-        for (n, (share, straddles)) in unmeasured.into_iter().zip(measured) {
+        for (n, (share, straddles, corners)) in unmeasured.into_iter().zip(measured) {
             self.seen_share[n as usize] = share;
             self.straddles[n as usize] = straddles;
+            self.buried_corners[n as usize] = corners;
         }
         self.seen_area = vec![0.0; tree.nodes.len()];
         for &leaf in &tree.leaves {

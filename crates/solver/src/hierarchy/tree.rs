@@ -485,14 +485,15 @@ impl Tree {
     }
 
     /// The leaves as a mesh: face by face, corners shared between the leaves of a face on the
-    /// same side of where light reaches (`buried` tells a leaf no light reaches). A buried
-    /// leaf's corners are its own: shared, they carried the lit side's light into it (under a
-    /// teddy bear's feet) and its dark onto the lit side (a roof where a wall passes through).
-    pub fn leaf_mesh(&self, buried: impl Fn(u32) -> bool) -> Mesh {
+    /// same side of where light reaches (`buried` tells whether a leaf's `k`-th corner lies
+    /// where no light reaches, for the leaf). Kept apart, a buried leaf's corners carried no
+    /// longer the lit side's light into it (under a teddy bear's feet) nor its dark onto the
+    /// lit side (a roof where a wall passes through), and a lit leaf's corner inside a post
+    /// standing on it no longer took the dark of the leaf beside the post.
+    pub fn leaf_mesh(&self, buried: impl Fn(u32, usize) -> bool) -> Mesh {
         let mut mesh = Mesh::default();
         let mut corner_ids: HashMap<(u32, [u32; 2], bool), u32> = HashMap::new();
         for &leaf in &self.leaves {
-            let side = buried(leaf);
             let element = self.nodes[leaf as usize]
                 .element
                 .as_ref()
@@ -501,6 +502,7 @@ impl Tree {
             let count = element.patch.polygon.corners().len();
             let mut corners = [0u32; 4];
             for (k, &at) in element.lattice[..count].iter().enumerate() {
+                let side = buried(leaf, k);
                 corners[k] = *corner_ids.entry((face, at, side)).or_insert_with(|| {
                     mesh.positions.push(element.patch.polygon.corners()[k]);
                     mesh.positions.len() as u32 - 1
@@ -697,6 +699,34 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_corner_buried_for_one_leaf_is_that_leafs_own_and_the_rest_stay_shared() {
+        // A unit floor split into four leaves, their common corner at the centre buried for
+        // the first leaf alone (a post standing there, over that leaf's reading point).
+        let mut scene = Scene::default();
+        add_parallelogram(&mut scene, "floor", (DVec3::ZERO, DVec3::Z, DVec3::X), GREY);
+        let mut tree = Tree::over(&scene);
+        tree.collect_leaves();
+        tree.subdivide(tree.leaves[0]);
+        tree.collect_leaves();
+        assert_eq!(tree.leaves.len(), 4);
+        let centre = DVec3::new(0.5, 0.0, 0.5);
+        let at_centre = |p: DVec3| p.distance(centre) < 1e-12;
+        let first = tree.leaves[0];
+        let mesh = tree.leaf_mesh(|leaf, k| {
+            leaf == first && at_centre(tree.element_patch(leaf).polygon.corners()[k])
+        });
+        let ids: Vec<u32> = (mesh.patches.iter())
+            .flat_map(|p| p.corners[..p.corner_count()].to_vec())
+            .filter(|&c| at_centre(mesh.positions[c as usize]))
+            .collect();
+        assert_eq!(ids.len(), 4, "each leaf has a corner at the centre");
+        assert_ne!(ids[0], ids[1], "the first leaf's is its own");
+        assert!(ids[1..].iter().all(|&c| c == ids[1]), "{ids:?}");
+        // The 3 x 3 lattice points, the centre twice.
+        assert_eq!(mesh.positions.len(), 10);
     }
 
     #[test]
