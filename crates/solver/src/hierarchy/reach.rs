@@ -1,8 +1,9 @@
-//! Where light can reach: a leaf point is buried when (all but one of) the cosine rays from it
-//! meet the back of a face (under a box on the floor, inside a wall that cuts through it). Sources send their
-//! mean over the reached area, errors are measured against the mean over it, what an element
-//! gathers is pushed down to its reached parts only, and leaves whose points disagree, or that
-//! a face crosses between them, straddle the edge of the reach (refinement splits them).
+//! Where light can reach: a leaf point is buried when all but one of the cosine rays from it
+//! meet the back of a face (under a box on the floor, inside a wall that cuts through it).
+//! Sources send their mean over the reached area, errors are measured against the mean over
+//! it, what an element gathers is pushed down to its reached parts only, leaves whose points
+//! disagree, or that a face crosses between them, straddle the edge of the reach (refinement
+//! splits them), and a leaf's corners are shared only with leaves on the same side of it.
 
 use super::tree::{NONE, Tree};
 use crate::mesh::{Patch, corner_reading_point};

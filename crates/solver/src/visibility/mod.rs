@@ -192,7 +192,7 @@ const BURIED_RAYS: u32 = 8;
 /// in eight found it: on the monastery a 3 m sliver under an eave had one corner's reading
 /// point inside the solid it runs into counted buried (its light taken from the centroid)
 /// and the other's, 8 cm from it, counted reached, dark, so that the sliver read 0.14 where the
-/// reference reads 0.31 (the worst probe, a seventh of the squared error, at the seeds where
+/// reference reads 0.31 (the worst probe, an eighth of the squared error, at the seeds where
 /// it was that corner). With all but one, the monastery read 4.76 / 4.71 / 4.87% smooth RMS
 /// over seeds 0-2 instead of 5.73 / 4.89 / 5.06%; a point beside a wall seen from behind sends
 /// half its rays there, and stays reached (docs/BENCHMARKS.md).
