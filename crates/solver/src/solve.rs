@@ -407,9 +407,9 @@ impl Run<'_> {
 }
 
 /// Restart cycles of GMRES in a row, each leaving the residual above [`STALLED_CYCLE_RATIO`]
-/// times the last cycle's, after which the solve gives up: restarted GMRES
-/// on an operator whose rows sum past one over the reflectance can make no headway at all, and
-/// the iteration limit alone let such a solve run on for hours (docs/BENCHMARKS.md).
+/// times the last cycle's, after which the solve gives up: restarted GMRES on an operator
+/// whose rows sum past one over the reflectance can make no headway at all, and the iteration
+/// limit alone let such a solve run on for hours (docs/BENCHMARKS.md).
 const STALLED_CYCLES: u32 = 4;
 
 /// A cycle that does not take the residual below this share of the last cycle's has stalled.
