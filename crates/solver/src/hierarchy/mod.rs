@@ -220,10 +220,24 @@ impl Hierarchy {
     /// The leaves as a mesh: face by face, corners shared between the leaves of a face, but
     /// not across the edge of where light reaches ([`tree::Tree::leaf_mesh`]).
     pub fn leaf_mesh(&self) -> Mesh {
-        self.tree.leaf_mesh(|leaf, corner| {
-            self.reach.seen_share[leaf as usize] == 0.0
-                || self.reach.buried_corners[leaf as usize][corner]
-        })
+        self.tree
+            .leaf_mesh(|leaf, corner| !self.reaches_corner(leaf, corner))
+    }
+
+    /// Per leaf (as [`Hierarchy::leaf_mesh`] lists them) and corner, whether light reaches
+    /// where that corner's light is read: the sides the mesh keeps corners apart by, for
+    /// viewers' corners to read light only where the mesh says it reaches.
+    pub fn reached_corners(&self) -> Vec<[bool; 4]> {
+        (self.tree.leaves.iter())
+            .map(|&leaf| std::array::from_fn(|corner| self.reaches_corner(leaf, corner)))
+            .collect()
+    }
+
+    /// Whether light reaches `leaf`'s `corner`: the leaf is not buried whole, nor the corner's
+    /// reading point ([`reach::Reach::buried_corners`]).
+    fn reaches_corner(&self, leaf: u32, corner: usize) -> bool {
+        self.reach.seen_share[leaf as usize] != 0.0
+            && !self.reach.buried_corners[leaf as usize][corner]
     }
 
     /// What refinement and solving cost so far.

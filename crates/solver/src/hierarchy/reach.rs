@@ -184,6 +184,7 @@ mod tests {
     use crate::hierarchy::refine::{can_split_to, finest_radius};
     use crate::hierarchy::tree::Tree;
     use crate::hierarchy::{Hierarchy, HierarchySettings, receiving_area};
+    use crate::mesh::corner_reading_point;
     use crate::visibility::Occluders;
     use glam::dvec3;
 
@@ -260,6 +261,43 @@ mod tests {
             "{reached} vs {}",
             1.0 - footprint
         );
+    }
+
+    #[test]
+    fn a_floor_corner_is_reached_on_the_lit_side_of_a_wall_and_the_mesh_shares_it_on_that_side_alone()
+     {
+        // The box's side at x = 0.6 runs through the floor: light reaches where a corner's
+        // light is read ([`corner_reading_point`]) exactly where that point lies at x < 0.6 on
+        // a leaf it reaches somewhere (a leaf whose test points are all in the box receives
+        // nothing, and shows it at every corner), and a corner the leaf mesh shares between
+        // leaves is read on one side for all of them.
+        let edge = 0.6;
+        let scene = floor_cut_by_a_box(edge);
+        let hierarchy = build(&scene, 0.5);
+        let (mesh, reached) = (hierarchy.leaf_mesh(), hierarchy.reached_corners());
+        assert_eq!(reached.len(), mesh.patches.len());
+        let mut side_of_corner = std::collections::HashMap::new();
+        let (mut lit, mut dark) = (0, 0);
+        for (i, (patch, flags)) in mesh.patches.iter().zip(&reached).enumerate() {
+            let corners = &patch.corners[..patch.corner_count()];
+            for (&c, &reaches) in corners.iter().zip(flags) {
+                let side = side_of_corner.entry(c).or_insert(reaches);
+                assert_eq!(*side, reaches, "corner {c} is shared across the wall");
+                if patch.face != 0 {
+                    continue;
+                }
+                let read_at = corner_reading_point(mesh.positions[c as usize], patch.centroid);
+                let lit_leaf = hierarchy.reach.seen_share[hierarchy.tree.leaves[i] as usize] > 0.0;
+                assert_eq!(
+                    reaches,
+                    read_at.x < edge && lit_leaf,
+                    "corner read at {read_at}"
+                );
+                if reaches { lit += 1 } else { dark += 1 }
+            }
+        }
+        println!("floor corners: {lit} reached, {dark} buried");
+        assert!(lit > 0 && dark > 0);
     }
 
     #[test]

@@ -74,7 +74,8 @@ pub(super) fn split_where_direct_light_curves(
     let display_finest = finest * DISPLAY_FINEST_SHARE;
     let mesh = hierarchy.leaf_mesh();
     let averaged = CornerIndirect::Averaged;
-    let light = CornerLight::new(scene, &mesh, occluders, lights, averaged, seed, progress);
+    let reached = (&mesh, hierarchy.reached_corners());
+    let light = CornerLight::new(scene, reached, occluders, lights, averaged, seed, progress);
     let misfit = light.direct_misfit(&mesh, &hierarchy.leaf_emission());
     let tolerance = MISFIT_TOLERANCE * hierarchy.mean_reflected(&radiosity);
     let mut worst: Vec<(f64, usize)> = (0..mesh.patches.len())
@@ -104,9 +105,9 @@ pub(super) fn split_where_direct_light_curves(
         hierarchy.split_for_display(&chosen, &radiosity, occluders, finest, settings.max_leaves);
     let split = hierarchy.leaf_mesh();
     // Most points are where they were: they keep the direct light gathered to decide.
-    let meshes = (&mesh, &split);
+    let (meshes, reached) = ((&mesh, &split), hierarchy.reached_corners());
     Displayed {
-        light: light.after_splits(scene, meshes, occluders, lights, progress),
+        light: light.after_splits(scene, meshes, reached, occluders, lights, progress),
         mesh: split,
         radiosity,
     }
@@ -180,7 +181,7 @@ mod tests {
         let seed = Seed::default();
         let light = CornerLight::new(
             scene,
-            &mesh,
+            (&mesh, hierarchy.reached_corners()),
             &occluders,
             &lights,
             gathered,

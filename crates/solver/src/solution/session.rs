@@ -4,7 +4,7 @@
 use super::display::{Displayed, split_where_direct_light_curves};
 use super::report::{ObjectRadiosity, SolveReport, StageSeconds};
 use super::request::{SolveError, SolveRequest, check_dense_size};
-use super::vertices::{CornerIndirect, CornerLight, clamp_below_zero};
+use super::vertices::{CornerIndirect, CornerLight, clamp_below_zero, reached_corners};
 use crate::check::{CheckSettings, Estimate};
 use crate::form_factors::{DenseFormFactors, UpdateStats};
 use crate::hierarchy::{BuiltHierarchy, Hierarchy, HierarchySettings, HierarchyStats};
@@ -180,8 +180,10 @@ impl Session {
         let lights = lit_objects(scene);
         let averaged = CornerIndirect::Averaged;
         let seed = request.seed;
-        let corner_light =
-            CornerLight::new(scene, mesh, &occluders, &lights, averaged, seed, progress);
+        let reached = (mesh, reached_corners(mesh, &occluders, seed));
+        let corner_light = CornerLight::new(
+            scene, reached, &occluders, &lights, averaged, seed, progress,
+        );
         seconds.form_factors = clock.elapsed().as_secs_f64();
         Ok(Session::assemble(
             scene.clone(),
@@ -482,13 +484,15 @@ impl Session {
                 );
                 let averaged = CornerIndirect::Averaged;
                 let lights = &self.lights;
+                let seed = self.request.seed;
+                let reached = reached_corners(&self.mesh, &occluders, seed);
                 self.corner_light = CornerLight::new(
                     &self.scene,
-                    &self.mesh,
+                    (&self.mesh, reached),
                     &occluders,
                     lights,
                     averaged,
-                    self.request.seed,
+                    seed,
                     &no_progress,
                 );
                 Ok(MoveReport {

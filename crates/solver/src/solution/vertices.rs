@@ -151,18 +151,19 @@ impl CornerLight {
     /// Gathers the emitters of `scene` at the corners of `mesh` (built from it): the faces
     /// that emit, and every face of the objects in `lights` (a light turned off keeps its
     /// place, so that turning it on again finds its direct light gathered), with their
-    /// `indirect` light, in the sample patterns `seed` draws; each pass of rays reports its
-    /// `progress`.
+    /// `indirect` light, in the sample patterns `seed` draws; `reached` tells, per patch and
+    /// corner slot, whether light reaches where that corner's light is read
+    /// ([`reached_corners`], or a hierarchy's reach). Each pass of rays reports its `progress`.
     pub fn new(
         scene: &Scene,
-        mesh: &Mesh,
+        (mesh, reached): (&Mesh, Vec<[bool; 4]>),
         occluders: &Occluders,
         lights: &BTreeSet<u32>,
         indirect: CornerIndirect,
         seed: Seed,
         progress: &(dyn Fn(Progress) + Sync),
     ) -> CornerLight {
-        let mut light = CornerLight::ungathered(mesh, occluders, indirect, seed);
+        let mut light = CornerLight::ungathered(reached, indirect, seed);
         light.gather_lights(scene, mesh, occluders, lights, progress);
         light
     }
@@ -171,11 +172,13 @@ impl CornerLight {
     /// gathered anew on `mesh`, the leaves of the same hierarchy after display splits, with
     /// its indirect light [`CornerIndirect::Gathered`]: a point of `mesh` that is one of
     /// `before`'s to the bit (its place, facing, face and rays' origins: the leaves no split
-    /// touched and the corners among them) keeps the direct light it gathered there.
+    /// touched and the corners among them) keeps the direct light it gathered there. `reached`
+    /// is `mesh`'s, as [`CornerLight::new`] takes it.
     pub(super) fn after_splits(
         self,
         scene: &Scene,
         (before, mesh): (&Mesh, &Mesh),
+        reached: Vec<[bool; 4]>,
         occluders: &Occluders,
         lights: &BTreeSet<u32>,
         progress: &(dyn Fn(Progress) + Sync),
@@ -185,32 +188,13 @@ impl CornerLight {
             centres: GatheredAt::new(&GatherPoint::centroids_of(before), self.centres),
         });
         let gathered = CornerIndirect::Gathered;
-        let mut light = CornerLight::ungathered(mesh, occluders, gathered, self.seed);
+        let mut light = CornerLight::ungathered(reached, gathered, self.seed);
         light.gather(scene, mesh, occluders, lights, earlier, progress);
         light
     }
 
-    /// Nothing gathered yet at the corners of `mesh`, but which patches light reaches there.
-    fn ungathered(
-        mesh: &Mesh,
-        occluders: &Occluders,
-        indirect: CornerIndirect,
-        seed: Seed,
-    ) -> CornerLight {
-        let reached = mesh
-            .patches
-            .par_iter()
-            .enumerate()
-            .map(|(i, patch)| {
-                let mut reached = [true; 4];
-                for (slot, &c) in patch.corners[..patch.corner_count()].iter().enumerate() {
-                    let inside = corner_reading_point(mesh.positions[c as usize], patch.centroid);
-                    let pattern = seed.pair(i, slot);
-                    reached[slot] = !occluders.is_buried(inside, patch.normal, patch.face, pattern);
-                }
-                reached
-            })
-            .collect();
+    /// Nothing gathered yet, but which patches light `reached` at each corner.
+    fn ungathered(reached: Vec<[bool; 4]>, indirect: CornerIndirect, seed: Seed) -> CornerLight {
         CornerLight {
             corners: PointWeights::none(0),
             centres: PointWeights::none(0),
@@ -503,6 +487,27 @@ impl CornerLight {
             .map(|(sum, area)| if area > 0.0 { sum / area } else { Rgb::ZERO })
             .collect()
     }
+}
+
+/// Per patch of `mesh` and corner slot, whether light reaches the patch where that corner's
+/// light is read ([`corner_reading_point`]; not under a box standing on the floor:
+/// [`Occluders::is_buried`]), tested along the patterns `seed` draws. A hierarchy's reach has
+/// tested the same points for its mesh's sides ([`Hierarchy::reached_corners`]): there the
+/// two would be read twice and could disagree at a point on the edge.
+///
+/// [`Hierarchy::reached_corners`]: crate::hierarchy::Hierarchy::reached_corners
+pub fn reached_corners(mesh: &Mesh, occluders: &Occluders, seed: Seed) -> Vec<[bool; 4]> {
+    (mesh.patches.par_iter().enumerate())
+        .map(|(i, patch)| {
+            let mut reached = [true; 4];
+            for (slot, &c) in patch.corners[..patch.corner_count()].iter().enumerate() {
+                let inside = corner_reading_point(mesh.positions[c as usize], patch.centroid);
+                let pattern = seed.pair(i, slot);
+                reached[slot] = !occluders.is_buried(inside, patch.normal, patch.face, pattern);
+            }
+            reached
+        })
+        .collect()
 }
 
 /// Replaces the value `at_corners` of each `unreached` corner by the one the visible
@@ -853,10 +858,12 @@ mod tests {
                 .iter()
                 .position(|p| p.distance(dvec3(1.0, 0.0, 1.0)) < 1e-12)
                 .expect("a floor vertex under the lamp's corner");
+            let occluders = Occluders::new(&scene);
+            let reached = super::reached_corners(&solved.mesh, &occluders, Seed::default());
             let light = CornerLight::new(
                 &scene,
-                &solved.mesh,
-                &Occluders::new(&scene),
+                (&solved.mesh, reached),
+                &occluders,
                 &std::collections::BTreeSet::new(),
                 super::CornerIndirect::Averaged,
                 Seed::default(),
@@ -979,7 +986,10 @@ mod tests {
         let gathered = super::CornerIndirect::Gathered;
         let lights = BTreeSet::new();
         let seed = Seed::default();
-        let light = CornerLight::new(&scene, &mesh, &occluders, &lights, gathered, seed, progress);
+        let reached = (&mesh, super::reached_corners(&mesh, &occluders, seed));
+        let light = CornerLight::new(
+            &scene, reached, &occluders, &lights, gathered, seed, progress,
+        );
         let mut reflected = vec![Rgb::ZERO; mesh.positions.len()];
         for patch in mesh.patches.iter().filter(|p| p.face == 1) {
             for &c in &patch.corners[..patch.corner_count()] {
@@ -1028,7 +1038,7 @@ mod tests {
         let seed = Seed::default();
         let light = CornerLight::new(
             &scene,
-            &before,
+            (&before, hierarchy.reached_corners()),
             &occluders,
             &lights,
             averaged,
@@ -1050,8 +1060,9 @@ mod tests {
         let radiosity = vec![Rgb::ZERO; before.patches.len()];
         hierarchy.split_for_display(&chosen, &radiosity, &occluders, 0.0, usize::MAX);
         let after = hierarchy.leaf_mesh();
-        let light =
-            light.after_splits(&scene, (&before, &after), &occluders, &lights, &no_progress);
+        let meshes = (&before, &after);
+        let reached = hierarchy.reached_corners();
+        let light = light.after_splits(&scene, meshes, reached, &occluders, &lights, &no_progress);
         let (mut kept, mut gathered) = (0, 0);
         for (point, value) in read(&light, &after) {
             match earlier.get(&point) {
