@@ -118,7 +118,7 @@ fn the_check_shows_its_probes_as_it_traces_them_and_stops_within_its_time() {
 }
 
 /// `--target-error` on the Cornell box, both ways: a hierarchy refined from where it is (each
-/// step's knob half the last, from 0.4; its leaves never fewer) and a dense mesh solved again
+/// step's knob half the last, from 0.8; its leaves never fewer) and a dense mesh solved again
 /// twice as fine. Each stops at the first step whose bound is within the target, and the
 /// answer is within it against the stored reference too.
 #[test]
@@ -193,8 +193,8 @@ fn a_solve_to_a_target_stops_within_it_and_is_within_it_on_the_cornell_box() {
 /// not at the `--error` floor it did not need.
 #[test]
 fn a_move_rebuilds_a_hierarchy_solved_to_a_target_at_the_knob_it_reached() {
-    // The Cornell box reads about 3.3% at the starting knob (its estimate up to 4.8%): 3%
-    // takes steps, and is reached above the 0.03 floor.
+    // The Cornell box reads about 5% at the starting knob: 3% takes steps, and is reached
+    // above the 0.03 floor.
     let target = solver::Target {
         error: 0.03,
         seconds: None,

@@ -34,7 +34,7 @@ pub struct CheckArgs {
     #[arg(long, env = "RADCAST_CHECK", value_enum, default_value_t = Check::On)]
     pub check: Check,
     /// Refine until the self-check's upper bound on the smooth RMS error is at most this
-    /// (0.05 for 5%): a hierarchy from a coarse knob (0.4), halved each step down to --error,
+    /// (0.05 for 5%): a hierarchy from a coarse knob (0.8), halved each step down to --error,
     /// refined from where it is, until a step adds under 1% more leaves; a dense mesh solved
     /// again at twice --patches each step. Says where it stopped and why (`target` in the
     /// JSON). The default, 0.05, holds while the check is on and no --patches, --patch-size
