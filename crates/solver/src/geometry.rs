@@ -340,7 +340,7 @@ fn angle_from(sine: f64, cosine: f64) -> f64 {
 
 /// Sutherland-Hodgman clip of `polygon` to the half-space in front of the plane through `origin`
 /// with normal `normal`; writes the result to `out` and returns its corner count.
-fn clip_above_plane(
+pub(crate) fn clip_above_plane(
     polygon: &[DVec3],
     origin: DVec3,
     normal: DVec3,

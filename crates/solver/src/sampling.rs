@@ -2,6 +2,7 @@
 //! on the unit square, and cosine-distributed directions. Every ray the solver casts comes from
 //! here, so results are the same on any thread count.
 
+use crate::geometry::clip_above_plane;
 use glam::DVec3;
 use std::f64::consts::PI;
 
@@ -85,30 +86,50 @@ pub fn cosine_direction(normal: DVec3, u: f64, v: f64) -> DVec3 {
 /// estimate); drawn by solid angle, each weighs only the cosine at the point.
 #[derive(Clone, Copy, Debug)]
 pub struct SphericalPolygon {
-    triangles: [SphericalTriangle; 2],
-    /// Fan triangles: one for a triangle, two for a quad.
+    triangles: [SphericalTriangle; MAX_FAN_TRIANGLES],
+    /// Fan triangles in use, each with some solid angle.
     count: usize,
 }
 
+/// Fan triangles of the largest polygon drawn from: a quad with a corner cut off by the
+/// horizon ([`SphericalPolygon::seen_above`]) has five corners.
+const MAX_FAN_TRIANGLES: usize = 3;
+
 impl SphericalPolygon {
-    /// The polygon with `corners` (three or four, convex) as seen from `origin`, or `None`
-    /// where a corner lies on the origin or a fan triangle is seen edge-on.
+    /// The polygon with `corners` (three to five, convex) as seen from `origin`, or `None`
+    /// where a corner lies on the origin or the polygon is seen edge-on. A fan triangle seen
+    /// edge-on covers no solid angle and is left out.
     pub fn seen_from(origin: DVec3, corners: &[DVec3]) -> Option<SphericalPolygon> {
         let direction = |p: DVec3| (p - origin).try_normalize();
-        let (a, b, c) = (
-            direction(corners[0])?,
-            direction(corners[1])?,
-            direction(corners[2])?,
-        );
-        let first = SphericalTriangle::new(a, b, c)?;
-        let (second, count) = match corners.get(3) {
-            Some(&d) => (SphericalTriangle::new(a, c, direction(d)?)?, 2),
-            None => (first, 1),
+        let first = direction(corners[0])?;
+        let mut triangles = [None; MAX_FAN_TRIANGLES];
+        for (k, pair) in corners[1..].windows(2).enumerate() {
+            let (b, c) = (direction(pair[0])?, direction(pair[1])?);
+            triangles[k] = SphericalTriangle::new(first, b, c);
+        }
+        let mut kept = triangles.into_iter().flatten();
+        let any = kept.next()?;
+        let mut polygon = SphericalPolygon {
+            triangles: [any; MAX_FAN_TRIANGLES],
+            count: 1,
         };
-        Some(SphericalPolygon {
-            triangles: [first, second],
-            count,
-        })
+        for triangle in kept {
+            polygon.triangles[polygon.count] = triangle;
+            polygon.count += 1;
+        }
+        Some(polygon)
+    }
+
+    /// The part of the polygon with `corners` (three or four, convex) in front of the plane
+    /// through `origin` with normal `normal`, as seen from `origin`: what lies behind a point's
+    /// tangent plane gives it no light, and drawn from there a direction is wasted (half the
+    /// sky, from a wall).
+    pub fn seen_above(origin: DVec3, normal: DVec3, corners: &[DVec3]) -> Option<SphericalPolygon> {
+        let mut clipped = [DVec3::ZERO; 8];
+        let count = clip_above_plane(corners, origin, normal, &mut clipped);
+        (count >= 3)
+            .then(|| SphericalPolygon::seen_from(origin, &clipped[..count]))
+            .flatten()
     }
 
     /// The solid angle it covers, steradians.
@@ -123,14 +144,17 @@ impl SphericalPolygon {
     /// `u` picks the triangle and then the sub-area within it, so stratified `(u, v)` stay
     /// stratified.
     pub fn direction(&self, u: f64, v: f64) -> DVec3 {
-        let first = self.triangles[0].solid_angle();
-        let picked = u * self.solid_angle();
-        if self.count == 1 || picked < first {
-            self.triangles[0].direction(picked / first, v)
-        } else {
-            let second = self.triangles[1].solid_angle();
-            self.triangles[1].direction(((picked - first) / second).min(1.0), v)
+        let mut picked = u * self.solid_angle();
+        let last = self.count - 1;
+        for triangle in &self.triangles[..last] {
+            let share = triangle.solid_angle();
+            if picked < share {
+                return triangle.direction(picked / share, v);
+            }
+            picked -= share;
         }
+        let share = self.triangles[last].solid_angle();
+        self.triangles[last].direction((picked / share).min(1.0), v)
     }
 }
 
@@ -256,6 +280,48 @@ mod tests {
         cases
     }
 
+    /// The integral of the cosine at `point` (about `normal`; below its horizon, zero) over
+    /// `view` of `polygon`, from 2^16 directions drawn uniformly over it, each checked to meet
+    /// the polygon; and the least cosine drawn.
+    fn integrated_cosine(
+        view: &SphericalPolygon,
+        polygon: &Polygon,
+        point: DVec3,
+        normal: DVec3,
+    ) -> (f64, f64) {
+        let n: u32 = 1 << 16;
+        let (plane_normal, on_plane) = (polygon.normal(), polygon.corners()[0]);
+        let (mut cosines, mut least) = (0.0, f64::INFINITY);
+        for k in 0..n {
+            // Independent uniform numbers: unbiased on any polygon (a sliver's map is too
+            // uneven near its ends for a grid's midpoints to integrate within 0.1%).
+            let uniform = |j: u64| unit_interval(splitmix64(2 * u64::from(k) + j));
+            let w = view.direction(uniform(0), uniform(1));
+            assert!((w.length() - 1.0).abs() < 1e-12);
+            let hit = point + w * (on_plane - point).dot(plane_normal) / w.dot(plane_normal);
+            let closest = polygon.closest_point(hit);
+            assert!(
+                closest.distance(hit) < 1e-9 * (1.0 + hit.distance(point)),
+                "{w} from {point} leaves the polygon at {hit}"
+            );
+            cosines += normal.dot(w).max(0.0);
+            least = least.min(normal.dot(w));
+        }
+        (cosines / f64::from(n) * view.solid_angle(), least)
+    }
+
+    /// Pi times Lambert's exact factor from `point` (facing `normal`) to `polygon`, whichever
+    /// side of it the point is on: the integral of the cosine over the solid angle it covers.
+    fn exact_integral(polygon: &Polygon, point: DVec3, normal: DVec3) -> f64 {
+        let (plane_normal, on_plane) = (polygon.normal(), polygon.corners()[0]);
+        let facing = if plane_normal.dot(point - on_plane) > 0.0 {
+            plane_normal
+        } else {
+            -plane_normal
+        };
+        PI * point_to_polygon_form_factor(point, normal, polygon, facing)
+    }
+
     #[test]
     fn directions_over_a_polygons_solid_angle_integrate_its_form_factor() {
         // Uniform over the solid angle, the mean cosine at the point times the solid angle is
@@ -263,35 +329,46 @@ mod tests {
         // does not enter), and every direction meets the polygon.
         for (polygon, point, normal) in polygons_and_points() {
             let view = SphericalPolygon::seen_from(point, polygon.corners()).expect("seen");
-            let n: u32 = 1 << 16;
-            let (plane_normal, on_plane) = (polygon.normal(), polygon.corners()[0]);
-            let mut cosines = 0.0;
-            for k in 0..n {
-                // Independent uniform numbers: unbiased on any polygon (a sliver's map is
-                // too uneven near its ends for a grid's midpoints to integrate within 0.1%).
-                let uniform = |j: u64| unit_interval(splitmix64(2 * u64::from(k) + j));
-                let w = view.direction(uniform(0), uniform(1));
-                assert!((w.length() - 1.0).abs() < 1e-12);
-                let hit = point + w * (on_plane - point).dot(plane_normal) / w.dot(plane_normal);
-                let closest = polygon.closest_point(hit);
-                assert!(
-                    closest.distance(hit) < 1e-9 * (1.0 + hit.distance(point)),
-                    "{w} from {point} leaves the polygon at {hit}"
-                );
-                cosines += normal.dot(w).max(0.0);
-            }
-            let integral = cosines / f64::from(n) * view.solid_angle();
-            let facing = if plane_normal.dot(point - on_plane) > 0.0 {
-                plane_normal
-            } else {
-                -plane_normal
-            };
-            let exact = PI * point_to_polygon_form_factor(point, normal, &polygon, facing);
+            let (integral, _) = integrated_cosine(&view, &polygon, point, normal);
+            let exact = exact_integral(&polygon, point, normal);
             assert!(
                 (integral - exact).abs() < 1e-2 * exact,
                 "{integral} against {exact} from {point}"
             );
         }
+    }
+
+    #[test]
+    fn directions_over_the_part_above_a_points_horizon_face_it_and_integrate_its_form_factor() {
+        // The same integral, with no direction drawn below the point's tangent plane; and from
+        // a wall under a square sky, centred, the part above its horizon is half the square.
+        let wall = (DVec3::ZERO, DVec3::X);
+        for (polygon, point, normal) in
+            polygons_and_points()
+                .into_iter()
+                .chain([(polygons_and_points()[0].0, wall.0, wall.1)])
+        {
+            let Some(view) = SphericalPolygon::seen_above(point, normal, polygon.corners()) else {
+                assert_eq!(exact_integral(&polygon, point, normal), 0.0, "{point}");
+                continue;
+            };
+            let whole = SphericalPolygon::seen_from(point, polygon.corners()).expect("seen");
+            assert!(view.solid_angle() <= whole.solid_angle() * (1.0 + 1e-12));
+            let (integral, least) = integrated_cosine(&view, &polygon, point, normal);
+            let exact = exact_integral(&polygon, point, normal);
+            assert!(
+                least >= -1e-12,
+                "a direction {least} below the horizon at {point}"
+            );
+            assert!(
+                (integral - exact).abs() < 1e-2 * exact,
+                "{integral} against {exact} from {point}"
+            );
+        }
+        let square = polygons_and_points()[0].0;
+        let above = SphericalPolygon::seen_above(wall.0, wall.1, square.corners()).expect("seen");
+        let whole = SphericalPolygon::seen_from(wall.0, square.corners()).expect("seen");
+        assert!((above.solid_angle() - whole.solid_angle() / 2.0).abs() < 1e-12);
     }
 
     #[test]
