@@ -97,9 +97,12 @@ const MAX_FAN_TRIANGLES: usize = 3;
 
 impl SphericalPolygon {
     /// The polygon with `corners` (three to five, convex) as seen from `origin`, or `None`
-    /// where a corner lies on the origin or the polygon is seen edge-on. A fan triangle seen
-    /// edge-on covers no solid angle and is left out.
+    /// where it has fewer or more corners, a corner lies on the origin or the polygon is seen
+    /// edge-on. A fan triangle seen edge-on covers no solid angle and is left out.
     pub fn seen_from(origin: DVec3, corners: &[DVec3]) -> Option<SphericalPolygon> {
+        if !(3..=MAX_FAN_TRIANGLES + 2).contains(&corners.len()) {
+            return None;
+        }
         let direction = |p: DVec3| (p - origin).try_normalize();
         let first = direction(corners[0])?;
         let mut triangles = [None; MAX_FAN_TRIANGLES];
@@ -383,6 +386,10 @@ mod tests {
         assert!((view.solid_angle() - 4.0 * PI / 6.0).abs() < 1e-12);
         // Seen edge-on, a polygon has no solid angle to draw from.
         assert!(SphericalPolygon::seen_from(dvec3(0.0, 0.0, 1.0), &face).is_none());
+        // Nor with corners a fan of three triangles cannot hold.
+        assert!(SphericalPolygon::seen_from(DVec3::ZERO, &face[..2]).is_none());
+        let hexagon = [face.as_slice(), &[dvec3(-1.0, 0.0, 1.0); 2]].concat();
+        assert!(SphericalPolygon::seen_from(DVec3::ZERO, &hexagon).is_none());
     }
 
     #[test]
