@@ -15,7 +15,7 @@ Fetches (once; cached in cache/corpus/, checked by SHA-256) and writes scenes/co
 
 The models' triangles are written as shipped (Kd 1 and all); only positions are placed and
 scaled. With --references, also writes each scene's path-traced reference
-(`radcast reference --probes 1000 --samples 65536`) to scenes/corpus/reference/, where
+(`radcast reference --probes 4000 --samples 65536`) to scenes/corpus/reference/, where
 `radcast bench --error` looks for it (and makes the same one when it is not there).
 """
 
@@ -272,7 +272,7 @@ def main():
         for path, _ in written:
             reference = path.parent / "reference" / f"{path.stem}.json"
             if not reference.exists():
-                subprocess.run([str(radcast), "reference", str(path), "--probes", "1000",
+                subprocess.run([str(radcast), "reference", str(path), "--probes", "4000",
                                 "--samples", "65536", "--out", str(reference)], check=True)
 
 
