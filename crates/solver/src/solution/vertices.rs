@@ -714,11 +714,16 @@ impl EmitterPoints {
     /// else by area.
     fn for_corner(corner: &GatherPoint, emitter: &Emitter) -> EmitterPoints {
         let corners = emitter.polygon.corners();
+        // Where the part above the horizon covers the least solid angle, the whole emitter
+        // does too: the whole one's view is built only where that part covers less.
+        let covers_enough = |origin: DVec3| {
+            SphericalPolygon::seen_from(origin, corners)
+                .is_some_and(|view| view.solid_angle() >= MIN_SOLID_ANGLE)
+        };
         (corner.insides.iter())
             .map(|&origin| {
-                SphericalPolygon::seen_from(origin, corners)
-                    .filter(|view| view.solid_angle() >= MIN_SOLID_ANGLE)
-                    .and_then(|_| SphericalPolygon::seen_above(origin, corner.normal, corners))
+                SphericalPolygon::seen_above(origin, corner.normal, corners)
+                    .filter(|above| above.solid_angle() >= MIN_SOLID_ANGLE || covers_enough(origin))
             })
             .collect::<Option<Vec<_>>>()
             .map_or(EmitterPoints::ByArea, EmitterPoints::BySolidAngle)
