@@ -187,8 +187,13 @@ pub(super) struct GatheredAt<T> {
 impl<T> GatheredAt<T> {
     /// `rows`, gathered at `points`.
     pub(super) fn new(points: &[Option<GatherPoint>], rows: PointRows<T>) -> GatheredAt<T> {
-        let by_point = (points.iter().enumerate())
-            .filter_map(|(i, point)| Some((point.as_ref()?.fingerprint(), i as u32)))
+        // Fingerprinted in parallel, as points are looked up: each generation of display
+        // splits hashes every point of the leaves before it.
+        let fingerprints: Vec<Option<u128>> = (points.par_iter())
+            .map(|point| point.as_ref().map(GatherPoint::fingerprint))
+            .collect();
+        let by_point = (fingerprints.into_iter().enumerate())
+            .filter_map(|(i, fingerprint)| Some((fingerprint?, i as u32)))
             .collect();
         GatheredAt { rows, by_point }
     }

@@ -168,12 +168,11 @@ impl CornerLight {
         light
     }
 
-    /// This light, gathered on `before` with its indirect light [`CornerIndirect::Averaged`],
-    /// gathered anew on `mesh`, the leaves of the same hierarchy after display splits, with
-    /// its indirect light [`CornerIndirect::Gathered`]: a point of `mesh` that is one of
-    /// `before`'s to the bit (its place, facing, face and rays' origins: the leaves no split
-    /// touched and the corners among them) keeps the direct light it gathered there. `reached`
-    /// is `mesh`'s, as [`CornerLight::new`] takes it.
+    /// This light, gathered on `before`, gathered anew on `mesh`, the leaves of the same
+    /// hierarchy after display splits, its indirect light from the same place: a point of
+    /// `mesh` that is one of `before`'s to the bit (its place, facing, face and rays' origins:
+    /// the leaves no split touched and the corners among them) keeps the direct light it
+    /// gathered there. `reached` is `mesh`'s, as [`CornerLight::new`] takes it.
     pub(super) fn after_splits(
         self,
         scene: &Scene,
@@ -187,8 +186,7 @@ impl CornerLight {
             corners: GatheredAt::new(&GatherPoint::corners_of(before), self.corners),
             centres: GatheredAt::new(&GatherPoint::centroids_of(before), self.centres),
         });
-        let gathered = CornerIndirect::Gathered;
-        let mut light = CornerLight::ungathered(reached, gathered, self.seed);
+        let mut light = CornerLight::ungathered(reached, self.indirect, self.seed);
         light.gather(scene, mesh, occluders, lights, earlier, progress);
         light
     }
