@@ -60,8 +60,9 @@ pub(super) struct Displayed {
 /// its pieces gathered: one split of a 16 m^2 floor leaf across a shadow's edge leaves pieces
 /// that still straddle it. Measured (docs/BENCHMARKS.md, `--check off`, seeds 0-2): the
 /// monastery read 5.70 / 5.44 / 5.45% smooth RMS after one, 5.33 / 5.14 / 5.06% after two
-/// (+25k leaves, about 2 s) and 5.23 / 5.21 / 5.11% after three; split until nothing is
-/// left to split, 13 generations used the room up at 5.24% and cost 20 s more.
+/// (+25k leaves; 4.7 s of a 63 s solve on a slow machine) and 5.23 / 5.21 / 5.11% after
+/// three; split until nothing is left to split, 13 generations used the room up at 5.24%
+/// and cost 20 s more. The tolerance was chosen with two ([`MISFIT_TOLERANCE`]).
 const DISPLAY_GENERATIONS: usize = 2;
 
 /// Splits the leaves of `hierarchy` (built from `scene`, solved as `radiosity`) whose
