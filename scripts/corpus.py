@@ -16,7 +16,8 @@ Fetches (once; cached in cache/corpus/, checked by SHA-256) and writes scenes/co
 The models' triangles are written as shipped (Kd 1 and all); only positions are placed and
 scaled. With --references, also writes each scene's path-traced reference
 (`radcast reference --probes 4000 --samples 65536`) to scenes/corpus/reference/, where
-`radcast bench --error` looks for it (and makes the same one when it is not there).
+`radcast bench --error` looks for it (for a scene without one it makes a smaller one, 1,000
+probes x 4,096 paths).
 """
 
 import argparse
