@@ -13,7 +13,7 @@
 //! each ray landed is kept (8 bytes a ray), once per mesh, and serves every emission edit.
 
 use super::gather_point::{GatherPoint, PointRows, Tally};
-use super::locator::{PatchLocator, fan_corners};
+use super::locator::PatchLocator;
 use crate::mesh::Mesh;
 use crate::sampling::{Seed, cosine_direction, stratified_uv};
 use crate::scene::Rgb;
@@ -58,16 +58,17 @@ impl Landing {
         }
     }
 
-    /// `values` (per mesh corner) interpolated where the ray landed.
-    fn read(self, mesh: &Mesh, values: &[Rgb]) -> Rgb {
-        let patch = &mesh.patches[(self.patch_and_fan & !FAN_BIT) as usize];
+    /// `values` (per mesh corner) interpolated where the ray landed, the mesh's patches given
+    /// by their `corners` alone.
+    fn read(self, corners: &[[u32; 4]], values: &[Rgb]) -> Rgb {
+        let patch = &corners[(self.patch_and_fan & !FAN_BIT) as usize];
         let k = if self.patch_and_fan & FAN_BIT != 0 {
             2
         } else {
             1
         };
         let [w1, w2] = self.weights.map(|w| f64::from(w) / f64::from(u16::MAX));
-        let [c0, c1, c2] = fan_corners(patch, k).map(|c| values[c as usize]);
+        let [c0, c1, c2] = [patch[0], patch[k], patch[k + 1]].map(|c| values[c as usize]);
         c0 * (1.0 - w1 - w2) + c1 * w1 + c2 * w2
     }
 }
@@ -125,9 +126,12 @@ impl BounceLandings {
     /// Per corner and per patch centroid, the mean over its rays of `reflected` (per corner
     /// of `mesh`) where they land: the irradiance it gathers from surfaces over pi, W/m^2.
     pub(super) fn read(&self, mesh: &Mesh, reflected: &[Rgb]) -> (Vec<Rgb>, Vec<Rgb>) {
+        // Ten passes read tens of millions of landings: a patch's corners alone are 16 bytes
+        // of its more than 200, one cache line fewer missed a landing.
+        let corners: Vec<[u32; 4]> = mesh.patches.iter().map(|p| p.corners).collect();
         (
-            self.corners.read(mesh, reflected),
-            self.centres.read(mesh, reflected),
+            self.corners.read(&corners, reflected),
+            self.centres.read(&corners, reflected),
         )
     }
 }
@@ -174,10 +178,10 @@ impl Landings {
         Landings { rows, rays }
     }
 
-    /// Per point, the mean over its rays of `reflected` (per corner of `mesh`) where they
-    /// land.
-    fn read(&self, mesh: &Mesh, reflected: &[Rgb]) -> Vec<Rgb> {
-        let sums = (self.rows).map_rows(|row| row.iter().map(|l| l.read(mesh, reflected)).sum());
+    /// Per point, the mean over its rays of `reflected` (per corner of the mesh whose patches
+    /// have `corners`) where they land.
+    fn read(&self, corners: &[[u32; 4]], reflected: &[Rgb]) -> Vec<Rgb> {
+        let sums = (self.rows).map_rows(|row| row.iter().map(|l| l.read(corners, reflected)).sum());
         (sums.into_iter().zip(&self.rays))
             .map(|(sum, &rays)| sum / f64::from(rays.max(1)))
             .collect()

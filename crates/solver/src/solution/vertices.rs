@@ -379,8 +379,9 @@ impl CornerLight {
         // Each corner's emission, direct light and what interpolation misses of it, with
         // `indirect(c)` for the light reflected from surfaces. Buried on every side, a corner
         // gets no light: only its face's own emission leaves.
-        let values_with = |indirect: &dyn Fn(usize) -> Rgb| -> Vec<Rgb> {
+        let values_with = |indirect: &(dyn Fn(usize) -> Rgb + Sync)| -> Vec<Rgb> {
             (0..mesh.positions.len())
+                .into_par_iter()
                 .map(|c| match surface[c] {
                     Some((own_emission, reflectance)) => {
                         own_emission + reflectance * direct[c] + direct_missed[c] + indirect(c)
@@ -396,7 +397,7 @@ impl CornerLight {
         // the direct light's does.
         if let Some(bounce) = &self.bounce {
             for _ in 0..GATHERED_BOUNCES {
-                let reflected: Vec<Rgb> = (values.iter().zip(&surface))
+                let reflected: Vec<Rgb> = (values.par_iter().zip(&surface))
                     .map(|(value, surface)| surface.map_or(Rgb::ZERO, |(e, _)| *value - e))
                     .collect();
                 let (mut gathered, centre_gathered) = bounce.read(mesh, &reflected);
@@ -469,10 +470,18 @@ impl CornerLight {
 
     /// Per corner of `mesh`, the area-weighted mean of `per_patch` (its index, the patch) over
     /// the patches around it that light reaches there; zero where none does.
-    fn reached_mean(&self, mesh: &Mesh, per_patch: impl Fn(usize, &Patch) -> Rgb) -> Vec<Rgb> {
+    fn reached_mean(
+        &self,
+        mesh: &Mesh,
+        per_patch: impl Fn(usize, &Patch) -> Rgb + Sync,
+    ) -> Vec<Rgb> {
+        // The patches' values in parallel (each bounce takes second-order means of a million
+        // patches), summed into the corners in order.
+        let values: Vec<Rgb> = (mesh.patches.par_iter().enumerate())
+            .map(|(i, patch)| per_patch(i, patch))
+            .collect();
         let mut sums = vec![(Rgb::ZERO, 0.0); mesh.positions.len()];
-        for (i, patch) in mesh.patches.iter().enumerate() {
-            let value = per_patch(i, patch);
+        for ((i, patch), value) in mesh.patches.iter().enumerate().zip(values) {
             for (slot, &c) in patch.corners[..patch.corner_count()].iter().enumerate() {
                 if self.reached[i][slot] {
                     let sum = &mut sums[c as usize];
