@@ -181,6 +181,7 @@ pub fn solve(
         settings,
         emission_norm,
         progress,
+        restart: GMRES_RESTART,
     };
     let (iterations, residual) = match (settings.method, entries) {
         (Method::GaussSeidel, Some(entries)) => run.gauss_seidel(entries, &mut radiosity),
@@ -199,6 +200,47 @@ pub fn solve(
     })
 }
 
+/// Solves `system` on `transport` by GMRES restarted every `restart` products, from
+/// `initial`, to `settings`' tolerance and iteration limit, leaving what dips below zero as it
+/// is, so the answer stays linear in the emission up to the tolerance. The basis kept is
+/// `restart + 1` vectors of the system's size.
+pub fn gmres_unclamped(
+    transport: &dyn Transport,
+    system: &System,
+    settings: &SolverSettings,
+    restart: usize,
+    initial: &[Rgb],
+) -> SolveOutcome {
+    let emission_norm = system.weighted_norm(system.emission);
+    if emission_norm == 0.0 {
+        return SolveOutcome {
+            radiosity: vec![Rgb::ZERO; initial.len()],
+            iterations: 0,
+            residual: 0.0,
+            converged: true,
+        };
+    }
+    let mut run = Run {
+        transport,
+        system,
+        settings,
+        emission_norm,
+        progress: &crate::no_progress,
+        restart,
+    };
+    let mut radiosity = initial.to_vec();
+    let (iterations, residual) = run.gmres(&mut radiosity);
+    SolveOutcome {
+        radiosity,
+        iterations,
+        residual,
+        converged: residual <= settings.tolerance,
+    }
+}
+
+/// Products between GMRES restarts for the radiosity system: its basis is `31 n` values.
+const GMRES_RESTART: usize = 30;
+
 /// Channel-wise `x / y`, zero where `y` is zero (a channel with no light, or a converged one).
 fn safe_div(x: Rgb, y: Rgb) -> Rgb {
     Rgb::select(y.cmpeq(Rgb::ZERO), Rgb::ZERO, x / y)
@@ -210,6 +252,8 @@ struct Run<'a> {
     settings: &'a SolverSettings,
     emission_norm: f64,
     progress: &'a (dyn Fn(Progress) + Sync),
+    /// Products between GMRES restarts.
+    restart: usize,
 }
 
 impl Run<'_> {
@@ -317,7 +361,6 @@ impl Run<'_> {
     /// `M = I - rho F`, so that its minimised 2-norm is our weighted residual norm. The three
     /// channels run as three Krylov processes sharing each matrix-vector product.
     fn gmres(&mut self, radiosity: &mut [Rgb]) -> (usize, f64) {
-        const RESTART: usize = 30;
         let system = self.system;
         let n = radiosity.len();
         let scale: Vec<f64> = system.area.iter().map(|a| a.sqrt()).collect();
@@ -342,7 +385,7 @@ impl Run<'_> {
             let mut hessenberg: Vec<Vec<Rgb>> = Vec::new();
             let (mut cosines, mut sines): (Vec<Rgb>, Vec<Rgb>) = (Vec::new(), Vec::new());
             let mut g = vec![beta];
-            for k in 0..RESTART {
+            for k in 0..self.restart {
                 // w = D M D^-1 v_k
                 unscaled
                     .iter_mut()

@@ -1,6 +1,6 @@
 //! The last bounces of indirect light gathered at each display corner: rays from the corner
 //! read the solution's reflected light where they land, as viewers would see it there (where
-//! they land is kept, and read once per bounce gathered: `vertices::GATHERED_BOUNCES`).
+//! they land is kept, and read once a pass of the last bounces: `vertices::LastBounces`).
 //!
 //! A corner's indirect light averaged from the patches around it carries every error the
 //! patches' links make (a cluster's sampled factor, a pair dropped as hidden, a patch too
@@ -190,7 +190,7 @@ impl Landings {
 
 /// Per corner of `mesh`, the area it stands for in what viewers see: its share of each patch
 /// around it (a third of a triangle, a quarter of a quad).
-fn corner_areas(mesh: &Mesh) -> Vec<f64> {
+pub(super) fn corner_areas(mesh: &Mesh) -> Vec<f64> {
     let mut areas = vec![0.0; mesh.positions.len()];
     for patch in &mesh.patches {
         let corners = &patch.corners[..patch.corner_count()];

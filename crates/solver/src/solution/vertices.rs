@@ -12,18 +12,20 @@
 //! misses over each patch goes into its corners with the indirect light, so the mean of what
 //! viewers show over a surface is its solved light (the Cornell box at 148 patches: energy
 //! −4.6% → −0.1%, smooth RMS 13% → 7.8%). On a hierarchy, whose links carry errors of their
-//! own, the indirect part is then gathered at the corner too: its last ten bounces, read
-//! through rays from the corner ([`bounce`](super::bounce)), and from each patch's centroid,
-//! so that what interpolation misses of it over a patch goes into the corners as the direct
-//! light's does. Everything is linear in each emitter's emission, so edits still superpose.
+//! own, the indirect part is then gathered at the corner too: its last bounces, solved
+//! through rays from the corner ([`bounce`](super::bounce)), and read from each patch's
+//! centroid, so that what interpolation misses of it over a patch goes into the corners as
+//! the direct light's does. Everything is linear in each emitter's emission (the bounces up
+//! to their solve's tolerance), so edits still superpose.
 
-use super::bounce::BounceLandings;
+use super::bounce::{BounceLandings, corner_areas};
 use super::gather_point::{GatherPoint, GatheredAt, PointWeights, Tally};
 use crate::Progress;
 use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
 use crate::mesh::{Mesh, Patch, corner_reading_point};
 use crate::sampling::{Seed, SphericalPolygon, roberts_point, stratified_uv};
 use crate::scene::{Rgb, Scene};
+use crate::solve::{SolverSettings, System, gmres_unclamped};
 use crate::transport::Transport;
 use crate::visibility::Occluders;
 use glam::DVec3;
@@ -64,18 +66,21 @@ struct RayBudget {
     penumbra: u32,
 }
 
-/// Bounces of indirect light gathered at the corners ([`bounce`](super::bounce)), each from
-/// the values the one before gave: the first reads the patches' solution through the corners'
-/// own visibility, the next reads the one before, so the links' errors reach viewers through
-/// one more reflection a pass. Measured (docs/BENCHMARKS.md), smooth RMS with 2 / 3 / 4 / 6 /
-/// 10: the furnished room (a closed room, where light bounces most) 8.36 / 7.30 / 6.94 / 6.27
-/// / 5.69% (energy −0.2% → +1.1%), the monastery 7.28 / 7.24 / - / 7.20 / 7.20%, the Cornell
-/// box at 0.13 1.55 / 1.53 / 1.54 / 1.54 / 1.54%, the teddy bear and the monastery piece the
-/// same at each (with 0 and 1, the monastery once read 13.0 and 10.6%). Each costs one
-/// reading of the rays' landings, no rays: about 0.4 s on the monastery (its solve stage,
-/// which makes the vertex values, 1.7 s with two, 5.1 s with ten). A fixed count keeps the
-/// values linear in the solution (edits sum them).
-const GATHERED_BOUNCES: usize = 10;
+/// How closely the corners' last bounces are solved ([`LastBounces`]): the relative residual
+/// of `y = d + A y`, area-weighted, at which GMRES stops. The gathered indirect light is the
+/// fixed point of one pass `A` of the bounce's rays, started from the patches' solution; ten
+/// passes, the count kept before, left the furnished room (a closed room: `A` damps its slowest
+/// part by about 5% a pass) far from it: 5.49% smooth RMS against 4.01% solved, `--check
+/// off` (docs/BENCHMARKS.md). Open scenes get there in 4-6 products (the monastery,
+/// its piece, the teddy bear, the Cornell box), the furnished room in 25.
+const BOUNCE_TOLERANCE: f64 = 1e-4;
+
+/// The most passes GMRES may take for the last bounces ([`BOUNCE_TOLERANCE`]).
+const MAX_BOUNCE_PASSES: usize = 60;
+
+/// GMRES's restart for the last bounces: its basis holds this many vectors of the corners'
+/// values and one more (on the monastery, ~20 MB each).
+const BOUNCE_RESTART: usize = 10;
 
 /// The least weight a patch's unreached corners must hold in its interpolated mean for their
 /// value to be extrapolated through its centroid ([`extrapolate_unreached`]): half, so that an
@@ -329,14 +334,17 @@ impl CornerLight {
     /// instead of adding up; what interpolation misses is the direct light's second-order mean
     /// over the patch (from its corners and centroid) less the interpolated mean, so what
     /// viewers show of a patch holds its light where the direct light curves. Where the
-    /// indirect light is [`CornerIndirect::Gathered`], the patches' mean is only the first
-    /// reading: each of [`GATHERED_BOUNCES`] passes replaces it by what the corner's rays read
-    /// of the reflected light the pass before left at the corners where they land, with what
-    /// interpolating that misses over the patches around it (from their centroids' rays).
+    /// indirect light is [`CornerIndirect::Gathered`], the patches' mean is only where the
+    /// last bounces start: the corners' reflected light is solved as the fixed point of what
+    /// their rays read of it where they land ([`LastBounces`], to [`BOUNCE_TOLERANCE`]), and
+    /// what interpolating the last reading misses over the patches (from their centroids'
+    /// rays) goes into their corners as the direct light's does. Inside the passes it did
+    /// not: a corner's correction reads its neighbours' gathers with weights of both signs,
+    /// and fed back pass after pass it kept parts of the furnished room from settling at all.
     ///
-    /// Linear in `radiosity` and `emission` together: what negative round-off leaves below zero
-    /// is not clamped here ([`clamp_below_zero`] does it last), so the values of a sum of
-    /// solutions are the sum of their values.
+    /// Linear in `radiosity` and `emission` together up to the bounces' tolerance: what
+    /// negative round-off leaves below zero is not clamped here ([`clamp_below_zero`] does it
+    /// last), so the values of a sum of solutions are the sum of their values.
     pub fn linear_corner_radiosity(
         &self,
         mesh: &Mesh,
@@ -396,19 +404,29 @@ impl CornerLight {
         // interpolating the corners' gathers misses over each patch goes into its corners as
         // the direct light's does.
         if let Some(bounce) = &self.bounce {
-            for _ in 0..GATHERED_BOUNCES {
-                let reflected: Vec<Rgb> = (values.par_iter().zip(&surface))
+            let reflected = |values: &[Rgb]| -> Vec<Rgb> {
+                (values.par_iter().zip(&surface))
                     .map(|(value, surface)| surface.map_or(Rgb::ZERO, |(e, _)| *value - e))
-                    .collect();
-                let (mut gathered, centre_gathered) = bounce.read(mesh, &reflected);
-                extrapolate_unreached(mesh, &unreached, &mut gathered, &centre_gathered);
-                let missed = self.missed_by_interpolation(mesh, &gathered, &centre_gathered);
-                values = values_with(&|c| {
-                    surface[c].map_or(Rgb::ZERO, |(_, reflectance)| {
-                        reflectance * gathered[c] + missed[c]
-                    })
-                });
-            }
+                    .collect()
+            };
+            let passes = LastBounces {
+                mesh,
+                bounce,
+                unreached: &unreached,
+                reflectance: surface.iter().map(|s| s.map(|(_, r)| r)).collect(),
+            };
+            let solved = passes.solve(
+                &reflected(&values_with(&|_| Rgb::ZERO)),
+                &reflected(&values),
+            );
+            let (mut gathered, centre_gathered) = bounce.read(mesh, &solved);
+            extrapolate_unreached(mesh, &unreached, &mut gathered, &centre_gathered);
+            let missed = self.missed_by_interpolation(mesh, &gathered, &centre_gathered);
+            values = values_with(&|c| {
+                surface[c].map_or(Rgb::ZERO, |(_, reflectance)| {
+                    reflectance * gathered[c] + missed[c]
+                })
+            });
         }
         values
     }
@@ -493,6 +511,58 @@ impl CornerLight {
         sums.into_iter()
             .map(|(sum, area)| if area > 0.0 { sum / area } else { Rgb::ZERO })
             .collect()
+    }
+}
+
+/// The last bounces at a mesh's corners: one pass `A` reads the reflected light `y` (per
+/// corner, W/m^2) where each corner's rays land, and reflects it; the corners' reflected light
+/// is `y = d + A y`, `d` what they reflect of the direct light.
+struct LastBounces<'a> {
+    mesh: &'a Mesh,
+    bounce: &'a BounceLandings,
+    /// Per corner, whether light reaches it from none of its patches ([`extrapolate_unreached`]).
+    unreached: &'a [bool],
+    /// Per corner, its face's reflectance; `None` for a corner no patch uses.
+    reflectance: Vec<Option<Rgb>>,
+}
+
+impl LastBounces<'_> {
+    /// `y` for the corners' reflected direct light `direct`, from `start`, by GMRES to
+    /// [`BOUNCE_TOLERANCE`] (an answer linear in `direct` up to it, as edits need), the
+    /// residual weighted by the area each corner stands for.
+    fn solve(&self, direct: &[Rgb], start: &[Rgb]) -> Vec<Rgb> {
+        // A corner no patch uses stands for nothing, and reads and is read by nothing.
+        let areas: Vec<f64> = (corner_areas(self.mesh).into_iter())
+            .map(|a| if a > 0.0 { a } else { 1.0 })
+            .collect();
+        let ones = vec![Rgb::ONE; areas.len()];
+        let system = System {
+            reflectance: &ones,
+            emission: direct,
+            area: &areas,
+        };
+        let settings = SolverSettings {
+            tolerance: BOUNCE_TOLERANCE,
+            max_iterations: MAX_BOUNCE_PASSES,
+            ..SolverSettings::default()
+        };
+        gmres_unclamped(self, &system, &settings, BOUNCE_RESTART, start).radiosity
+    }
+}
+
+impl Transport for LastBounces<'_> {
+    fn patch_count(&self) -> usize {
+        self.mesh.positions.len()
+    }
+
+    /// `out = A reflected`.
+    fn gather(&self, reflected: &[Rgb], out: &mut [Rgb]) {
+        let (mesh, unreached) = (self.mesh, self.unreached);
+        let (mut gathered, centre_gathered) = self.bounce.read(mesh, reflected);
+        extrapolate_unreached(mesh, unreached, &mut gathered, &centre_gathered);
+        (out.par_iter_mut().enumerate()).for_each(|(c, out)| {
+            *out = self.reflectance[c].map_or(Rgb::ZERO, |r| r * gathered[c]);
+        });
     }
 }
 
@@ -1333,6 +1403,49 @@ mod tests {
             println!("hierarchical {hierarchical}: worst vertex off by {worst}");
             assert!(worst < 1e-6, "hierarchical {hierarchical}: off by {worst}");
         }
+    }
+
+    /// A transport that carries nothing: a patch solution with no direct light through links.
+    struct NoLinks(usize);
+
+    impl crate::transport::Transport for NoLinks {
+        fn patch_count(&self) -> usize {
+            self.0
+        }
+
+        fn gather(&self, _: &[Rgb], out: &mut [Rgb]) {
+            out.fill(Rgb::ZERO);
+        }
+    }
+
+    #[test]
+    fn the_last_bounces_are_solved_in_a_bright_furnace_from_a_patch_solution_far_off() {
+        // Every face of a closed cube emits 1 and reflects 0.9: B = 10 everywhere. Handed
+        // patches that hold only their emission, the corners start from 1 + 0.9 = 1.9 (their
+        // gathered direct light alone); ten passes of their rays would leave 8.1 x 0.9^10 =
+        // 2.8 of the 8.1 missing, solved they all read 10.
+        let mut scene = closed_cube();
+        scene
+            .faces
+            .iter_mut()
+            .for_each(|f| f.reflectance = Rgb::splat(0.9));
+        let mesh = Mesh::build(&scene, PatchTarget::EdgeLength(0.5));
+        let occluders = Occluders::new(&scene);
+        let seed = Seed::default();
+        let reached = (&mesh, super::reached_corners(&mesh, &occluders, seed));
+        let gathered = super::CornerIndirect::Gathered;
+        let (lights, progress) = (BTreeSet::new(), &no_progress);
+        let light = CornerLight::new(
+            &scene, reached, &occluders, &lights, gathered, seed, progress,
+        );
+        let emission: Vec<Rgb> = mesh.patches.iter().map(|p| p.emission).collect();
+        let transport = NoLinks(mesh.patches.len());
+        let values = light.linear_corner_radiosity(&mesh, &transport, &emission, &emission);
+        let worst = (values.iter())
+            .map(|b| (*b - Rgb::splat(10.0)).abs().max_element())
+            .fold(0.0, f64::max);
+        println!("worst vertex off by {worst}");
+        assert!(worst < 1e-2, "off by {worst}");
     }
 
     #[test]
