@@ -399,10 +399,9 @@ impl CornerLight {
                 .collect()
         };
         let mut values = values_with(&|c| averaged_indirect[c]);
-        // The last bounces gathered at the corners and the patches' centroids, each reading
-        // the values the one before gave, instead of the patches' indirect light; what
-        // interpolating the corners' gathers misses over each patch goes into its corners as
-        // the direct light's does.
+        // The last bounces gathered at the corners instead of the patches' indirect light,
+        // solved from it; what interpolating the corners' last gathers misses over each patch
+        // (from the centroids' gathers) goes into its corners as the direct light's does.
         if let Some(bounce) = &self.bounce {
             let reflected = |values: &[Rgb]| -> Vec<Rgb> {
                 (values.par_iter().zip(&surface))
