@@ -158,18 +158,41 @@ pub fn solve(
     initial: Option<&[Rgb]>,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<SolveOutcome, NeedsEntries> {
-    let (n, entries) = (transport.patch_count(), transport.entries());
+    let start = initial
+        .map(<[Rgb]>::to_vec)
+        .unwrap_or_else(|| vec![Rgb::ZERO; transport.patch_count()]);
+    let mut outcome = solve_unclamped(
+        transport,
+        system,
+        settings,
+        (GMRES_RESTART, progress),
+        start,
+    )?;
+    // The exact solution is a sum of non-negative terms; clamp round-off below zero.
+    (outcome.radiosity.iter_mut()).for_each(|b| *b = b.max(Rgb::ZERO));
+    Ok(outcome)
+}
+
+/// [`solve`] from `start`, GMRES restarted every `restart` products (its basis is `restart +
+/// 1` vectors of the system's size), each iteration reported to `progress`, leaving what dips
+/// below zero as it is: for a system whose answer may, and must stay linear in the emission up
+/// to the tolerance (the vertices' last bounces, `solution::vertices`).
+pub fn solve_unclamped(
+    transport: &dyn Transport,
+    system: &System,
+    settings: &SolverSettings,
+    (restart, progress): (usize, &(dyn Fn(Progress) + Sync)),
+    start: Vec<Rgb>,
+) -> Result<SolveOutcome, NeedsEntries> {
+    let entries = transport.entries();
     if settings.method.needs_entries() && entries.is_none() {
         return Err(NeedsEntries(settings.method));
     }
-    let mut radiosity = initial
-        .map(<[Rgb]>::to_vec)
-        .unwrap_or_else(|| vec![Rgb::ZERO; n]);
     let emission_norm = system.weighted_norm(system.emission);
     if emission_norm == 0.0 {
         // No light: the answer is exactly zero, not 0/0.
         return Ok(SolveOutcome {
-            radiosity: vec![Rgb::ZERO; n],
+            radiosity: vec![Rgb::ZERO; start.len()],
             iterations: 0,
             residual: 0.0,
             converged: true,
@@ -181,8 +204,9 @@ pub fn solve(
         settings,
         emission_norm,
         progress,
-        restart: GMRES_RESTART,
+        restart,
     };
+    let mut radiosity = start;
     let (iterations, residual) = match (settings.method, entries) {
         (Method::GaussSeidel, Some(entries)) => run.gauss_seidel(entries, &mut radiosity),
         (Method::Progressive, Some(entries)) => run.progressive(entries, &mut radiosity),
@@ -190,52 +214,12 @@ pub fn solve(
         // GMRES; a per-patch method without entries was refused above.
         _ => run.gmres(&mut radiosity),
     };
-    // The exact solution is a sum of non-negative terms; clamp round-off below zero.
-    radiosity.iter_mut().for_each(|b| *b = b.max(Rgb::ZERO));
     Ok(SolveOutcome {
         radiosity,
         iterations,
         residual,
         converged: residual <= settings.tolerance,
     })
-}
-
-/// Solves `system` on `transport` by GMRES restarted every `restart` products, from
-/// `initial`, to `settings`' tolerance and iteration limit, leaving what dips below zero as it
-/// is, so the answer stays linear in the emission up to the tolerance. The basis kept is
-/// `restart + 1` vectors of the system's size.
-pub fn gmres_unclamped(
-    transport: &dyn Transport,
-    system: &System,
-    settings: &SolverSettings,
-    restart: usize,
-    initial: &[Rgb],
-) -> SolveOutcome {
-    let emission_norm = system.weighted_norm(system.emission);
-    if emission_norm == 0.0 {
-        return SolveOutcome {
-            radiosity: vec![Rgb::ZERO; initial.len()],
-            iterations: 0,
-            residual: 0.0,
-            converged: true,
-        };
-    }
-    let mut run = Run {
-        transport,
-        system,
-        settings,
-        emission_norm,
-        progress: &crate::no_progress,
-        restart,
-    };
-    let mut radiosity = initial.to_vec();
-    let (iterations, residual) = run.gmres(&mut radiosity);
-    SolveOutcome {
-        radiosity,
-        iterations,
-        residual,
-        converged: residual <= settings.tolerance,
-    }
 }
 
 /// Products between GMRES restarts for the radiosity system: its basis is `31 n` values.

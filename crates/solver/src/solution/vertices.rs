@@ -25,7 +25,7 @@ use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
 use crate::mesh::{Mesh, Patch, corner_reading_point};
 use crate::sampling::{Seed, SphericalPolygon, roberts_point, stratified_uv};
 use crate::scene::{Rgb, Scene};
-use crate::solve::{SolverSettings, System, gmres_unclamped};
+use crate::solve::{SolverSettings, System, solve_unclamped};
 use crate::transport::Transport;
 use crate::visibility::Occluders;
 use glam::DVec3;
@@ -545,7 +545,13 @@ impl LastBounces<'_> {
             max_iterations: MAX_BOUNCE_PASSES,
             ..SolverSettings::default()
         };
-        gmres_unclamped(self, &system, &settings, BOUNCE_RESTART, start).radiosity
+        let reported = (
+            BOUNCE_RESTART,
+            &crate::no_progress as &(dyn Fn(Progress) + Sync),
+        );
+        solve_unclamped(self, &system, &settings, reported, start.to_vec())
+            .expect("GMRES needs no single entries")
+            .radiosity
     }
 }
 
