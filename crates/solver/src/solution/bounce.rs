@@ -126,7 +126,7 @@ impl BounceLandings {
     /// Per corner and per patch centroid, the mean over its rays of `reflected` (per corner
     /// of `mesh`) where they land: the irradiance it gathers from surfaces over pi, W/m^2.
     pub(super) fn read(&self, mesh: &Mesh, reflected: &[Rgb]) -> (Vec<Rgb>, Vec<Rgb>) {
-        // Ten passes read tens of millions of landings: a patch's corners alone are 16 bytes
+        // Each pass of the last bounces reads tens of millions of landings: a patch's corners alone are 16 bytes
         // of its more than 200, one cache line fewer missed a landing.
         let corners: Vec<[u32; 4]> = mesh.patches.iter().map(|p| p.corners).collect();
         (

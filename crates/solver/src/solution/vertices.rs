@@ -412,14 +412,13 @@ impl CornerLight {
                 mesh,
                 bounce,
                 unreached: &unreached,
-                reflectance: surface.iter().map(|s| s.map(|(_, r)| r)).collect(),
+                surface: &surface,
             };
             let solved = passes.solve(
                 &reflected(&values_with(&|_| Rgb::ZERO)),
                 &reflected(&values),
             );
-            let (mut gathered, centre_gathered) = bounce.read(mesh, &solved);
-            extrapolate_unreached(mesh, &unreached, &mut gathered, &centre_gathered);
+            let (gathered, centre_gathered) = passes.gathered(&solved);
             let missed = self.missed_by_interpolation(mesh, &gathered, &centre_gathered);
             values = values_with(&|c| {
                 surface[c].map_or(Rgb::ZERO, |(_, reflectance)| {
@@ -521,11 +520,19 @@ struct LastBounces<'a> {
     bounce: &'a BounceLandings,
     /// Per corner, whether light reaches it from none of its patches ([`extrapolate_unreached`]).
     unreached: &'a [bool],
-    /// Per corner, its face's reflectance; `None` for a corner no patch uses.
-    reflectance: Vec<Option<Rgb>>,
+    /// Per corner, its face's emission and reflectance; `None` for a corner no patch uses.
+    surface: &'a [Option<(Rgb, Rgb)>],
 }
 
 impl LastBounces<'_> {
+    /// Per corner and per patch centroid, what its rays read of `reflected` where they land,
+    /// a corner light reaches from none of its patches taking it from their centroids.
+    fn gathered(&self, reflected: &[Rgb]) -> (Vec<Rgb>, Vec<Rgb>) {
+        let (mut gathered, centre_gathered) = self.bounce.read(self.mesh, reflected);
+        extrapolate_unreached(self.mesh, self.unreached, &mut gathered, &centre_gathered);
+        (gathered, centre_gathered)
+    }
+
     /// `y` for the corners' reflected direct light `direct`, from `start`, by GMRES to
     /// [`BOUNCE_TOLERANCE`] (an answer linear in `direct` up to it, as edits need), the
     /// residual weighted by the area each corner stands for.
@@ -562,11 +569,9 @@ impl Transport for LastBounces<'_> {
 
     /// `out = A reflected`.
     fn gather(&self, reflected: &[Rgb], out: &mut [Rgb]) {
-        let (mesh, unreached) = (self.mesh, self.unreached);
-        let (mut gathered, centre_gathered) = self.bounce.read(mesh, reflected);
-        extrapolate_unreached(mesh, unreached, &mut gathered, &centre_gathered);
+        let (gathered, _) = self.gathered(reflected);
         (out.par_iter_mut().enumerate()).for_each(|(c, out)| {
-            *out = self.reflectance[c].map_or(Rgb::ZERO, |r| r * gathered[c]);
+            *out = self.surface[c].map_or(Rgb::ZERO, |(_, r)| r * gathered[c]);
         });
     }
 }
