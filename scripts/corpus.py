@@ -8,7 +8,8 @@ Fetches (once; cached in cache/corpus/, checked by SHA-256) and writes scenes/co
 - monastery.obj: the samurai monastery in pybullet_data (PyPI `pybullet` 3.2.7, under its zlib
   licence; 124,990 triangles as shipped, Kd 0.64 everywhere) on a ground quad under an
   emitting sky quad; monastery-piece.obj: the faces of it within a 20 m square (a 6.7k-triangle
-  piece under a ground and sky of its own size).
+  piece under a ground and sky of its own size); monastery-village.obj: eight of it, four by
+  two, turned a quarter each (998k triangles).
 - living-room.obj: a 8 x 6 x 3 m room furnished with Blend Swap models of Debian's
   `sweethome3d-furniture` 1.8-1 (its BlendSwap-CC-0 library, CC0), lit by a ceiling lamp.
 - teddy.obj: the teddy bear of that library (curved triangle soup) on a floor under a lamp.
@@ -189,7 +190,35 @@ def monastery(wheel):
         kept, (low, top) = scene.model("monastery", source, mtl, lambda p: p, keep)
         sky_and_ground(scene, low, top, high[1] * 3)
         written.append((scene.write(), kept))
+    written.append(village(source, mtl))
     return written
+
+
+def village(source, mtl):
+    """Eight monasteries, four by two, each turned a quarter more than the last and a tenth of
+    its footprint from the next: a real model of a million triangles."""
+    low, high = bounds(source)
+    span = [1.1 * (high[k] - low[k]) for k in (0, 2)]
+    centre = [(low[k] + high[k]) / 2 for k in (0, 2)]
+    scene = Obj("monastery-village")
+    kept, first, last = 0, [float("inf")] * 3, [float("-inf")] * 3
+    for i in range(8):
+        # A quarter turn keeps the footprint in its cell only where it is square: use the
+        # larger side for both.
+        cell = max(span)
+        x, z = (i % 4 - 1.5) * cell, (i // 4 - 0.5) * cell
+        c, s = [(1, 0), (0, 1), (-1, 0), (0, -1)][i % 4]
+
+        def place(p, x=x, z=z, c=c, s=s):
+            u, v = p[0] - centre[0], p[2] - centre[1]
+            return (x + c * u + s * v, p[1], z - s * u + c * v)
+
+        faces, (lo, hi) = scene.model(f"monastery-{i}", source, mtl, place)
+        kept += faces
+        first = [min(a, b) for a, b in zip(first, lo)]
+        last = [max(a, b) for a, b in zip(last, hi)]
+    sky_and_ground(scene, first, last, high[1] * 3)
+    return scene.write(), kept
 
 
 FURNISHINGS = [

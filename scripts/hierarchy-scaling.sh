@@ -7,7 +7,7 @@
 # Usage: scripts/hierarchy-scaling.sh room|town|corpus [--error E] SIZE|NAME...
 #   room: SIZE pieces of furniture (radcast generate --pieces); town: about SIZE triangles of
 #   soup under a sky (radcast generate --town); corpus: the real models of scripts/corpus.py
-#   by NAME (monastery, monastery-piece, living-room, teddy).
+#   by NAME (monastery, monastery-piece, monastery-village, living-room, teddy).
 set -eu
 cd "$(dirname "$0")/.."
 family=$1
