@@ -72,7 +72,7 @@ impl SolveCommand {
         // The bar goes before the summary is printed.
         drop(printer);
         let report = &solved.report;
-        print_warnings(&scene, &request, report);
+        print_warnings((&scene, &solved.scene), &request, report);
         if json {
             let mut value = serde_json::to_value(report).context("serialising the report")?;
             value["peak_memory_bytes"] = HEAP.peak_usage().into();
@@ -132,7 +132,11 @@ impl SolveCommand {
 
 /// What the user must know about this answer, on stderr: a bad self-check, a target not
 /// reached, what loading changed, a coarser knob than asked, no convergence.
-fn print_warnings(scene: &std::path::Path, request: &solver::SolveRequest, report: &SolveReport) {
+fn print_warnings(
+    (path, scene): (&std::path::Path, &solver::Scene),
+    request: &solver::SolveRequest,
+    report: &SolveReport,
+) {
     let target = report.target.as_ref();
     if let Some(warning) = report.estimate.as_ref().and_then(Estimate::warning) {
         eprintln!("warning: {warning}");
@@ -152,7 +156,7 @@ fn print_warnings(scene: &std::path::Path, request: &solver::SolveRequest, repor
     if report.skipped_faces > 0 {
         eprintln!(
             "warning: {}: skipped {} zero-area faces",
-            scene.display(),
+            path.display(),
             report.skipped_faces
         );
     }
@@ -160,7 +164,7 @@ fn print_warnings(scene: &std::path::Path, request: &solver::SolveRequest, repor
     let last_knob = target.and_then(|t| t.steps.last()?.knob);
     let asked = request.hierarchy.map(|h| solver::HierarchySettings {
         error: last_knob.unwrap_or(h.error),
-        ..h
+        ..h.fitted_to(scene)
     });
     if let (Some(asked), Some(stats)) = (&asked, &report.hierarchy) {
         budget_warnings(asked, stats)

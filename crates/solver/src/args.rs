@@ -143,10 +143,11 @@ pub struct HierarchyArgs {
     /// the finest knob a solve to it may reach].
     #[arg(long, env = "RADCAST_ERROR")]
     pub error: Option<f64>,
-    /// With --method hierarchical: leaves at most (bounds memory, about 2.3 KB a leaf); the
-    /// JSON says `leaf_budget_reached` when refinement stopped there.
-    #[arg(long, env = "RADCAST_MAX_LEAVES", default_value_t = HierarchySettings::default().max_leaves)]
-    pub max_leaves: usize,
+    /// With --method hierarchical: leaves at most (bounds memory, about 2.3 KB a leaf)
+    /// [default: 500000, or 2 a face of the scene where that is more]; the JSON says
+    /// `leaf_budget_reached` when refinement stopped there.
+    #[arg(long, env = "RADCAST_MAX_LEAVES")]
+    pub max_leaves: Option<usize>,
     /// With --method hierarchical: links at most, about (bounds memory where links per leaf
     /// run high, about 250 bytes a link); the JSON says `link_budget_reached` when refinement
     /// stopped there.
@@ -188,17 +189,24 @@ impl HierarchyArgs {
         if !(error > 0.0 && error < 1.0) {
             return Err(format!("--error must be in (0, 1), got {error}"));
         }
-        if self.max_leaves == 0 {
+        if self.max_leaves == Some(0) {
             return Err("--max-leaves must be at least 1".into());
         }
         if self.max_links == 0 {
             return Err("--max-links must be at least 1".into());
         }
+        let default = HierarchySettings::default();
+        // A budget asked for holds as it is; the default one is fitted to the scene.
+        let (max_leaves, leaves_per_face) = match self.max_leaves {
+            Some(asked) => (asked, 0),
+            None => (default.max_leaves, default.leaves_per_face),
+        };
         Ok(HierarchySettings {
             error,
-            max_leaves: self.max_leaves,
+            max_leaves,
+            leaves_per_face,
             max_links: self.max_links,
-            ..HierarchySettings::default()
+            ..default
         })
     }
 }
@@ -359,5 +367,7 @@ mod tests {
         .expect("valid");
         let hierarchy = request.hierarchy.expect("hierarchical");
         assert_eq!((hierarchy.error, hierarchy.max_leaves), (0.1, 9));
+        // Asked for, the budget is not fitted to the scene's faces.
+        assert_eq!(hierarchy.leaves_per_face, 0);
     }
 }

@@ -80,8 +80,12 @@ pub struct HierarchySettings {
     /// [`HierarchyStats::knob_used`]); past a knob of 0.5, elements stop splitting instead
     /// ([`HierarchyStats::leaf_budget_reached`]). It also sets the smallest element
     /// ([`refine::finest_radius`]). A leaf costs about 2.3 KB with the ten or so links a room
-    /// scene gives it, so the default stays near 1.2 GB.
+    /// scene gives it, so the default stays near 1.2 GB on a model of up to 250k faces.
     pub max_leaves: usize,
+    /// Leaves a face of the scene the budget allows where that is more than `max_leaves`
+    /// ([`HierarchySettings::fitted_to`]); 0 where `max_leaves` was asked for and holds as it
+    /// is.
+    pub leaves_per_face: usize,
     /// Links at most, about: the bound on memory where links per leaf run high (a model of many
     /// small faces made 85 a leaf, 4.1 GB at 354k leaves). Passing it coarsens the knob at once
     /// by the least power of two at which the generation's pairs, by their errors, fit; past
@@ -97,10 +101,17 @@ impl Default for HierarchySettings {
             error: 0.03,
             max_rounds: 4,
             max_leaves: 500_000,
+            leaves_per_face: LEAVES_PER_FACE,
             max_links: 10_000_000,
         }
     }
 }
+
+/// Leaves a face the default leaf budget allows on a model of more faces than its 500k leaves
+/// allow for: each face starts as a leaf, so a budget of fewer leaves than faces stopped every
+/// split, and the large faces among a million small ones stayed whole (a village of eight
+/// monasteries, 1.01M faces: 13.5% smooth RMS at 500k; at 2M leaves 6.6%, docs/BENCHMARKS.md).
+pub const LEAVES_PER_FACE: usize = 2;
 
 /// Smallest element radius, as a fraction of `error` times its input face's radius capped at
 /// the median face radius ([`smallest_scale`]; relative to geometry, so that a lamp far above
@@ -432,6 +443,16 @@ impl Hierarchy {
 }
 
 impl HierarchySettings {
+    /// These settings with the leaf budget fitted to `scene`: [`HierarchySettings::max_leaves`]
+    /// or [`HierarchySettings::leaves_per_face`] a face, whichever is more.
+    pub fn fitted_to(self, scene: &Scene) -> HierarchySettings {
+        let per_face = self.leaves_per_face.saturating_mul(scene.faces.len());
+        HierarchySettings {
+            max_leaves: self.max_leaves.max(per_face),
+            ..self
+        }
+    }
+
     fn budget(&self) -> Budget {
         Budget {
             max_leaves: self.max_leaves,
@@ -669,6 +690,34 @@ mod tests {
             stats.elements > 6,
             "the cube's edges refine: {}",
             stats.elements
+        );
+    }
+
+    #[test]
+    fn a_budget_of_as_many_leaves_as_faces_splits_none_unless_it_follows_the_faces() {
+        let cube = closed_cube();
+        let faces = cube.faces.len();
+        let asked = HierarchySettings {
+            error: 0.1,
+            max_leaves: faces,
+            leaves_per_face: 0,
+            ..HierarchySettings::default()
+        };
+        assert_eq!(asked.fitted_to(&cube), asked);
+        // No room for a split: the knob coarsens until whole faces carry every link.
+        let (held, _) = build_within(&cube, asked);
+        assert_eq!((held.elements, held.knob_used), (faces, 0.8));
+        let following = HierarchySettings {
+            leaves_per_face: 4,
+            ..asked
+        }
+        .fitted_to(&cube);
+        assert_eq!(following.max_leaves, 4 * faces);
+        let (split, _) = build_within(&cube, following);
+        assert!(
+            split.elements > faces && split.elements <= 4 * faces,
+            "{} leaves",
+            split.elements
         );
     }
 

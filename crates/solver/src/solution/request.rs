@@ -142,9 +142,14 @@ impl SolveRequest {
     /// patches, docs/speed-vs-error.md). Else hierarchical: a mesh of one patch a face leaves
     /// large faces unresolved (a 6.7k-triangle real model, dense at 6,112 patches: 60% smooth
     /// RMS), and one fine enough for them does not fit (125k triangles: 74 GiB).
+    /// A hierarchy's leaf budget is fitted to the scene ([`HierarchySettings::fitted_to`]).
     pub fn for_scene(&self, scene: &Scene) -> (SolveRequest, Option<String>) {
         if !self.auto {
-            return (*self, None);
+            let fitted = SolveRequest {
+                hierarchy: self.hierarchy.map(|h| h.fitted_to(scene)),
+                ..*self
+            };
+            return (fitted, None);
         }
         let faces = scene.faces.len();
         let patches = Mesh::planned_count(scene, self.patches);
@@ -161,7 +166,7 @@ impl SolveRequest {
             );
             return (resolved(None), Some(why));
         }
-        let hierarchy = self.hierarchy.unwrap_or_default();
+        let hierarchy = self.hierarchy.unwrap_or_default().fitted_to(scene);
         let why = format!(
             "method: auto chose hierarchical at --error {} ({faces} faces: a dense mesh of {patches} patches {})",
             hierarchy.error,
