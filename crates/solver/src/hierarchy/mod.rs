@@ -110,7 +110,8 @@ impl Default for HierarchySettings {
 /// Leaves a face the default leaf budget allows on a model of more faces than its 500k leaves
 /// allow for: each face starts as a leaf, so a budget of fewer leaves than faces stopped every
 /// split, and the large faces among a million small ones stayed whole (a village of eight
-/// monasteries, 1.01M faces: 13.5% smooth RMS at 500k; at 2M leaves 6.6%, docs/BENCHMARKS.md).
+/// monasteries, 1.01M faces: 13.5% smooth RMS at 500k, 6.2% at two a face; three a face read
+/// the same 25% slower, docs/BENCHMARKS.md).
 pub const LEAVES_PER_FACE: usize = 2;
 
 /// Smallest element radius, as a fraction of `error` times its input face's radius capped at
