@@ -124,16 +124,21 @@ impl BounceLandings {
     }
 
     /// Per corner and per patch centroid, the mean over its rays of `reflected` (per corner
-    /// of `mesh`) where they land: the irradiance it gathers from surfaces over pi, W/m^2.
-    pub(super) fn read(&self, mesh: &Mesh, reflected: &[Rgb]) -> (Vec<Rgb>, Vec<Rgb>) {
-        // Each pass of the last bounces reads tens of millions of landings: a patch's corners alone are 16 bytes
-        // of its more than 200, one cache line fewer missed a landing.
-        let corners: Vec<[u32; 4]> = mesh.patches.iter().map(|p| p.corners).collect();
+    /// of the mesh whose [`patch_corners`] are `corners`) where they land: the irradiance it
+    /// gathers from surfaces over pi, W/m^2.
+    pub(super) fn read(&self, corners: &[[u32; 4]], reflected: &[Rgb]) -> (Vec<Rgb>, Vec<Rgb>) {
         (
-            self.corners.read(&corners, reflected),
-            self.centres.read(&corners, reflected),
+            self.corners.read(corners, reflected),
+            self.centres.read(corners, reflected),
         )
     }
+}
+
+/// Each patch's corners, the table [`BounceLandings::read`] looks landings up in: each pass of
+/// the last bounces reads tens of millions of landings, and a patch's corners alone are 16
+/// bytes of its more than 200, one cache line fewer missed a landing.
+pub(super) fn patch_corners(mesh: &Mesh) -> Vec<[u32; 4]> {
+    mesh.patches.iter().map(|p| p.corners).collect()
 }
 
 impl Landings {

@@ -18,7 +18,7 @@
 //! the direct light's does. Everything is linear in each emitter's emission (the bounces up
 //! to their solve's tolerance), so edits still superpose.
 
-use super::bounce::{BounceLandings, corner_areas};
+use super::bounce::{BounceLandings, corner_areas, patch_corners};
 use super::gather_point::{GatherPoint, GatheredAt, PointWeights, Tally};
 use crate::Progress;
 use crate::geometry::{Polygon, point_to_polygon_form_factor, triangle_area};
@@ -410,6 +410,7 @@ impl CornerLight {
             };
             let passes = LastBounces {
                 mesh,
+                patch_corners: patch_corners(mesh),
                 bounce,
                 unreached: &unreached,
                 surface: &surface,
@@ -517,6 +518,8 @@ impl CornerLight {
 /// is `y = d + A y`, `d` what they reflect of the direct light.
 struct LastBounces<'a> {
     mesh: &'a Mesh,
+    /// The mesh's [`patch_corners`], made once for every pass.
+    patch_corners: Vec<[u32; 4]>,
     bounce: &'a BounceLandings,
     /// Per corner, whether light reaches it from none of its patches ([`extrapolate_unreached`]).
     unreached: &'a [bool],
@@ -528,7 +531,7 @@ impl LastBounces<'_> {
     /// Per corner and per patch centroid, what its rays read of `reflected` where they land,
     /// a corner light reaches from none of its patches taking it from their centroids.
     fn gathered(&self, reflected: &[Rgb]) -> (Vec<Rgb>, Vec<Rgb>) {
-        let (mut gathered, centre_gathered) = self.bounce.read(self.mesh, reflected);
+        let (mut gathered, centre_gathered) = self.bounce.read(&self.patch_corners, reflected);
         extrapolate_unreached(self.mesh, self.unreached, &mut gathered, &centre_gathered);
         (gathered, centre_gathered)
     }
@@ -877,8 +880,8 @@ pub fn clamp_below_zero(mut values: Vec<Rgb>) -> Vec<Rgb> {
 #[cfg(test)]
 mod tests {
     use super::{
-        CornerLight, Emitter, extrapolate_unreached, interpolated_mean, second_order_mean,
-        seen_factors,
+        CornerLight, Emitter, extrapolate_unreached, interpolated_mean, patch_corners,
+        second_order_mean, seen_factors,
     };
     use crate::accuracy::evaluate;
     use crate::geometry::point_to_polygon_form_factor;
@@ -1199,7 +1202,7 @@ mod tests {
             .position(|p| p.distance(dvec3(1.0, 0.0, 1.0)) < 1e-12)
             .expect("a floor vertex under the plate's centre");
         let bounce = light.bounce.as_ref().expect("direct light is gathered");
-        let got = bounce.read(&mesh, &reflected).0[corner].x;
+        let got = bounce.read(&patch_corners(&mesh), &reflected).0[corner].x;
         let expected = 4.0 * howell_b3(1.0, 1.0, 1.0);
         println!("gathered {got} against 4 x Howell B-3 {expected}");
         // This corner, inside the floor, stands for more area than the mean gather point
@@ -1224,7 +1227,7 @@ mod tests {
         // curvature; the centroids' gathers put it back.
         let (mesh, light, reflected) = floor_under_a_reflecting_plate();
         let bounce = light.bounce.as_ref().expect("direct light is gathered");
-        let (at_corners, at_centres) = bounce.read(&mesh, &reflected);
+        let (at_corners, at_centres) = bounce.read(&patch_corners(&mesh), &reflected);
         let missed = light.missed_by_interpolation(&mesh, &at_corners, &at_centres);
         let shown: Vec<Rgb> = (at_corners.iter().zip(&missed))
             .map(|(gathered, missed)| *gathered + *missed / GREY.reflectance)
