@@ -258,13 +258,10 @@ impl Peers {
     }
 
     /// The peer's rows, and radcast's seconds at each row's smooth and flat RMS: log-log
-    /// between the two rows of radcast's front for that reading (whichever method) that
-    /// bracket it, as a user who wants that error would choose.
+    /// between the two rows of radcast's front for that reading that bracket it, as a user who
+    /// wants that error would choose; once on the front of every method, once on the
+    /// hierarchy's alone (the path that scales, which a peer's hierarchy is measured against).
     fn comparison(&self, rows: &[Row]) -> anyhow::Result<String> {
-        let fronts = (
-            front(rows, &self.scene, smooth_rms),
-            front(rows, &self.scene, flat_rms),
-        );
         let mut out = String::new();
         writeln!(
             out,
@@ -275,8 +272,25 @@ impl Peers {
         writeln!(out, "Peer rows: {}.\n", self.source)?;
         writeln!(
             out,
-            "radcast's seconds at the peer's error, interpolated log-log between the rows that bracket it on radcast's front for that reading, whichever method (smooth: the ★ rows above; flat: the rows nothing beats on time and flat RMS) (≤: the front's fastest row is already more accurate); a ratio above 1 means radcast is faster.\n"
+            "radcast's seconds at the peer's error, interpolated log-log between the rows that bracket it on radcast's front for that reading (smooth: the rows nothing beats on time and smooth RMS, the ★ rows above where every method counts; flat: the same by flat RMS) (≤: the front's fastest row is already more accurate); a ratio above 1 means radcast is faster."
         )?;
+        let of_scene: Vec<&Row> = rows.iter().filter(|r| r.scene == self.scene).collect();
+        let hierarchical: Vec<&Row> = (of_scene.iter().copied())
+            .filter(|r| r.method.starts_with("hierarchical"))
+            .collect();
+        for (methods, ours) in [
+            ("Any method", &of_scene),
+            ("The hierarchy alone", &hierarchical),
+        ] {
+            writeln!(out, "\n{methods}:\n")?;
+            self.table(&mut out, ours)?;
+        }
+        Ok(out)
+    }
+
+    /// One table of [`Peers::comparison`], met on the fronts of `ours`.
+    fn table(&self, out: &mut String, ours: &[&Row]) -> anyhow::Result<()> {
+        let fronts = (front(ours, smooth_rms), front(ours, flat_rms));
         writeln!(
             out,
             "| system | setting | leaves | links | seconds | smooth RMS | flat RMS | energy | radcast s at that smooth RMS | ratio | radcast s at that flat RMS | ratio |"
@@ -313,7 +327,7 @@ impl Peers {
                 at(p.flat_rms, flat_rms, &fronts.1),
             )?;
         }
-        Ok(out)
+        Ok(())
     }
 }
 
@@ -461,12 +475,11 @@ fn dominates(a: &Row, b: &Row, reading: fn(&Row) -> f64) -> bool {
     ta <= tb && reading(a) <= reading(b) && (ta < tb || reading(a) < reading(b))
 }
 
-/// The rows of `scene` that no other row dominates by `reading`, fastest first (along a
-/// front, error falls as time grows).
-fn front<'a>(rows: &'a [Row], scene: &str, reading: fn(&Row) -> f64) -> Vec<&'a Row> {
-    let of_scene = || rows.iter().filter(|r| r.scene == scene);
-    let mut front: Vec<&Row> = of_scene()
-        .filter(|r| !of_scene().any(|o| dominates(o, r, reading)))
+/// The rows of `rows` that no other dominates by `reading`, fastest first (along a front,
+/// error falls as time grows).
+fn front<'a>(rows: &[&'a Row], reading: fn(&Row) -> f64) -> Vec<&'a Row> {
+    let mut front: Vec<&Row> = (rows.iter().copied())
+        .filter(|r| !rows.iter().any(|o| dominates(o, r, reading)))
         .collect();
     front.sort_by(|a, b| a.seconds[3].total_cmp(&b.seconds[3]));
     front
@@ -728,6 +741,34 @@ mod tests {
         let lines: Vec<&str> = table.lines().filter(|l| l.starts_with("| Peer")).collect();
         assert!(lines[0].contains("| 0.200 | 10.0× |"), "{}", lines[0]);
         assert!(lines[1].contains("| ≤ 0.100 | ≥ 10.0× |"), "{}", lines[1]);
+    }
+
+    #[test]
+    fn the_hierarchy_alone_is_met_on_its_own_rows_after_every_method() {
+        // Dense rows twice as fast as the hierarchical ones at each error: every method meets
+        // the peer on the dense rows, the hierarchy alone on its own.
+        let hierarchical = |seconds, smooth_rms| Row {
+            method: "hierarchical E=0.3".into(),
+            ..ours(seconds, smooth_rms)
+        };
+        let rows = [
+            ours(0.1, 0.4),
+            ours(0.4, 0.1),
+            hierarchical(0.2, 0.4),
+            hierarchical(0.8, 0.1),
+        ];
+        let peers = Peers {
+            scene: "box".into(),
+            source: "here".into(),
+            rows: vec![peer(2.0, 0.2)],
+        };
+        let table = peers.comparison(&rows).expect("a table");
+        let lines: Vec<&str> = table.lines().filter(|l| l.starts_with("| Peer")).collect();
+        assert_eq!(lines.len(), 2, "{table}");
+        assert!(lines[0].contains("| 0.200 | 10.0× |"), "{}", lines[0]);
+        assert!(lines[1].contains("| 0.400 | 5.0× |"), "{}", lines[1]);
+        let alone = table.find("The hierarchy alone").expect("its heading");
+        assert!(table.find(lines[1]).expect("its row") > alone);
     }
 
     #[test]
