@@ -300,3 +300,62 @@ fn probes_go_only_where_the_error_is_measured_not_on_emitters() {
     scene.faces[1].emission = Rgb::splat(1.0);
     assert_eq!(place_probes(&scene, 500, 3).len(), 500);
 }
+
+#[test]
+fn probes_inside_a_solid_count_and_are_also_counted_apart() {
+    // A 4 x 4 floor with a closed box (faces outward) standing through it over [1, 2] x [1, 2]:
+    // everything is shown as 2 and the reference says 2, but 0 on the floor under the box,
+    // inside the solid. Every probe counts in the smooth RMS; those under the box are the
+    // buried ones, and at the others (what a viewer can see) the reading is exact.
+    let mut scene = solver::Scene::default();
+    let (x, y, z) = (
+        dvec3(1.0, 0.0, 0.0),
+        dvec3(0.0, 1.0, 0.0),
+        dvec3(0.0, 0.0, 1.0),
+    );
+    add_rect(
+        &mut scene,
+        "floor",
+        dvec3(0.0, 0.0, 0.0),
+        z * 4.0,
+        x * 4.0,
+        grey(0.5, 0.0),
+    );
+    let (low, high) = (dvec3(1.0, -0.5, 1.0), dvec3(2.0, 0.5, 2.0));
+    let sides = [
+        (low, x, z),
+        (dvec3(1.0, 0.5, 1.0), z, x),
+        (low, z, y),
+        (dvec3(2.0, -0.5, 1.0), y, z),
+        (low, y, x),
+        (dvec3(1.0, -0.5, 2.0), x, y),
+    ];
+    for (origin, u, v) in sides {
+        add_rect(&mut scene, "box", origin, u, v, grey(0.5, 0.0));
+    }
+    let mesh = solver::Mesh::build(&scene, PatchTarget::Count(64));
+    let radiosity = vec![Rgb::splat(2.0); mesh.patches.len()];
+    let corners = vec![Rgb::splat(2.0); mesh.positions.len()];
+    let under_the_box = |p: glam::DVec3| {
+        p.y.abs() < 1e-9 && (low.x..high.x).contains(&p.x) && (low.z..high.z).contains(&p.z)
+    };
+    let probes: Vec<Probe> = (place_probes(&scene, 400, 11).into_iter())
+        .map(|(face, p)| Probe {
+            position: p.to_array(),
+            face: scene.faces[face as usize].source,
+            object: String::new(),
+            radiosity: [if under_the_box(p) { 0.0 } else { 2.0 }; 3],
+            standard_error: [0.0; 3],
+        })
+        .collect();
+    let buried = (probes.iter())
+        .filter(|p| under_the_box(glam::DVec3::from(p.position)))
+        .count();
+    assert!(buried > 5, "{buried} probes under the box");
+    let error = evaluate(&scene, &mesh, &radiosity, &corners, &probes);
+    assert_eq!((error.probes, error.buried_probes), (400, buried));
+    assert!(error.visible_smooth.rms < 1e-12, "{error:?}");
+    // Off by 2 on every channel at the buried probes, against 2 at every visible one.
+    let expected = (buried as f64 / (400 - buried) as f64).sqrt();
+    assert!((error.smooth.rms - expected).abs() < 1e-12, "{error:?}");
+}

@@ -101,6 +101,15 @@ impl SolveCommand {
                     e.probes,
                     e.reference_noise
                 );
+                if e.buried_probes > 0 {
+                    println!(
+                        "            smooth RMS {:.4}, energy {:+.4} at the {} probes a viewer can see ({} lie inside solids)",
+                        e.visible_smooth.rms,
+                        e.visible_smooth.energy,
+                        e.probes - e.buried_probes,
+                        e.buried_probes
+                    );
+                }
                 for o in &e.objects {
                     println!(
                         "  {:<20} smooth RMS {:.4}, energy {:+.4}; flat RMS {:.4}  ({} probes, {:.0}% of the squared error)",

@@ -4,13 +4,19 @@
 //! and **smooth** (what viewers show: the corner values they are sent, interpolated over the
 //! patch's fan triangles, as `wire::display` does).
 //! Only probes on non-emitting faces count: an emitter's own emission is exact and would
-//! swamp the comparison.
+//! swamp the comparison. Probes inside solids (a beam's end through a wall, a floor under a
+//! column: real models are full of faces that pass through one another) count, and are also
+//! counted apart: no viewer outside the solid sees them, so the error at the others is the
+//! error of what can be seen.
 
 use crate::mesh::Mesh;
 use crate::reference::Probe;
+use crate::sampling::pair_seed;
 use crate::scene::{Rgb, Scene};
 use crate::solution::locator::{PatchLocator, Place, fan_corners};
+use crate::visibility::Occluders;
 use glam::DVec3;
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// Errors of one reading, all relative.
@@ -33,6 +39,12 @@ pub struct SolutionError {
     pub flat: ErrorStats,
     /// Interpolated values, as viewers show them.
     pub smooth: ErrorStats,
+    /// Probes that counted and lie inside a solid ([`Occluders::is_buried`]: the backs of
+    /// faces in almost every direction from them). Their reference is (near) zero, and no
+    /// viewer outside the solid sees what is shown there.
+    pub buried_probes: usize,
+    /// The smooth reading at the other probes alone: the error of what viewers can see.
+    pub visible_smooth: ErrorStats,
     /// The reference's own relative RMS standard error: the floor under `rms`.
     pub reference_noise: f64,
     /// The same readings object by object (those with counted probes, in scene order): where
@@ -172,14 +184,38 @@ pub fn evaluate(
     probes: &[Probe],
 ) -> SolutionError {
     let readings = read_at(scene, mesh, radiosity, corners, probes);
+    let buried = inside_solids(scene, probes, &readings.indices);
+    let visible: Vec<(Rgb, Rgb)> = (readings.smooth.iter().zip(&buried))
+        .filter_map(|(&pair, &buried)| (!buried).then_some(pair))
+        .collect();
     SolutionError {
         probes: readings.flat.len(),
         flat: stats(&readings.flat),
         smooth: stats(&readings.smooth),
+        buried_probes: readings.flat.len() - visible.len(),
+        visible_smooth: stats(&visible),
         reference_noise: readings.noise(),
         objects: readings.by_object(scene),
         worst: readings.worst(scene, probes),
     }
+}
+
+/// Per probe read (`indices` into `probes`), whether it lies inside a solid of `scene`, by
+/// the test where light reaches uses ([`Occluders::is_buried`]), seeded by the probe's index.
+fn inside_solids(scene: &Scene, probes: &[Probe], indices: &[usize]) -> Vec<bool> {
+    let (occluders, pieces) = (Occluders::new(scene), pieces_by_source(scene));
+    (indices.par_iter())
+        .map(|&i| {
+            let probe = &probes[i];
+            // The pieces of a source face share its plane: any of them gives the normal.
+            let Some(&face) = pieces.get(probe.face as usize).and_then(|p| p.first()) else {
+                return false;
+            };
+            let normal = scene.faces[face as usize].polygon.normal();
+            let x = DVec3::from(probe.position);
+            occluders.is_buried(x, normal, face, pair_seed(i, 0))
+        })
+        .collect()
 }
 
 /// Squared error of (solution, reference) `pairs`.
