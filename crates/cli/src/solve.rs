@@ -2,7 +2,7 @@
 
 use crate::{HEAP, ProgressPrinter};
 use anyhow::Context;
-use solver::accuracy::evaluate;
+use solver::accuracy::{SolutionError, evaluate};
 use solver::args::{SolveArgs, budget_warnings};
 use solver::check::{CheckSettings, Estimate, ReadingEstimate, self_check};
 use solver::reference::Reference;
@@ -92,50 +92,51 @@ impl SolveCommand {
                 );
             }
             if let Some(e) = &measured {
-                println!(
-                    "error       smooth RMS {:.4}, max {:.3}, energy {:+.4}; flat RMS {:.4}  ({} probes, reference noise {:.4})",
-                    e.smooth.rms,
-                    e.smooth.max,
-                    e.smooth.energy,
-                    e.flat.rms,
-                    e.probes,
-                    e.reference_noise
-                );
-                if e.buried_probes > 0 {
-                    println!(
-                        "            smooth RMS {:.4}, energy {:+.4} at the {} probes a viewer can see ({} lie inside solids)",
-                        e.visible_smooth.rms,
-                        e.visible_smooth.energy,
-                        e.probes - e.buried_probes,
-                        e.buried_probes
-                    );
-                }
-                for o in &e.objects {
-                    println!(
-                        "  {:<20} smooth RMS {:.4}, energy {:+.4}; flat RMS {:.4}  ({} probes, {:.0}% of the squared error)",
-                        o.name,
-                        o.smooth.rms,
-                        o.smooth.energy,
-                        o.flat.rms,
-                        o.probes,
-                        100.0 * o.smooth_share
-                    );
-                }
-                // The few places that hold most of the error on a real model, to look at.
-                for w in e.worst.iter().take(WORST_SHOWN) {
-                    let [x, y, z] = w.position;
-                    println!(
-                        "  worst at ({x:.3}, {y:.3}, {z:.3}), face {} of {}: shown {:.4}, reference {:.4}  ({:.0}% of the squared error)",
-                        w.face,
-                        w.object,
-                        w.smooth.into_iter().fold(0.0, f64::max),
-                        w.reference.into_iter().fold(0.0, f64::max),
-                        100.0 * w.smooth_share
-                    );
-                }
+                print_error(e);
             }
         }
         Ok(())
+    }
+}
+
+/// The error against a reference, as the summary prints it: the whole, at the probes a viewer
+/// can see, by object, and the worst probes.
+fn print_error(e: &SolutionError) {
+    println!(
+        "error       smooth RMS {:.4}, max {:.3}, energy {:+.4}; flat RMS {:.4}  ({} probes, reference noise {:.4})",
+        e.smooth.rms, e.smooth.max, e.smooth.energy, e.flat.rms, e.probes, e.reference_noise
+    );
+    if e.buried_probes > 0 {
+        println!(
+            "            smooth RMS {:.4}, energy {:+.4} at the {} probes a viewer can see ({} lie inside solids)",
+            e.visible_smooth.rms,
+            e.visible_smooth.energy,
+            e.probes - e.buried_probes,
+            e.buried_probes
+        );
+    }
+    for o in &e.objects {
+        println!(
+            "  {:<20} smooth RMS {:.4}, energy {:+.4}; flat RMS {:.4}  ({} probes, {:.0}% of the squared error)",
+            o.name,
+            o.smooth.rms,
+            o.smooth.energy,
+            o.flat.rms,
+            o.probes,
+            100.0 * o.smooth_share
+        );
+    }
+    // The few places that hold most of the error on a real model, to look at.
+    for w in e.worst.iter().take(WORST_SHOWN) {
+        let [x, y, z] = w.position;
+        println!(
+            "  worst at ({x:.3}, {y:.3}, {z:.3}), face {} of {}: shown {:.4}, reference {:.4}  ({:.0}% of the squared error)",
+            w.face,
+            w.object,
+            w.smooth.into_iter().fold(0.0, f64::max),
+            w.reference.into_iter().fold(0.0, f64::max),
+            100.0 * w.smooth_share
+        );
     }
 }
 
