@@ -200,12 +200,12 @@ def village(source, mtl):
     low, high = bounds(source)
     span = [1.1 * (high[k] - low[k]) for k in (0, 2)]
     centre = [(low[k] + high[k]) / 2 for k in (0, 2)]
+    # A quarter turn keeps the footprint in its cell only where it is square: use the larger
+    # side for both.
+    cell = max(span)
     scene = Obj("monastery-village")
     kept, first, last = 0, [float("inf")] * 3, [float("-inf")] * 3
     for i in range(8):
-        # A quarter turn keeps the footprint in its cell only where it is square: use the
-        # larger side for both.
-        cell = max(span)
         x, z = (i % 4 - 1.5) * cell, (i // 4 - 0.5) * cell
         c, s = [(1, 0), (0, 1), (-1, 0), (0, -1)][i % 4]
 
