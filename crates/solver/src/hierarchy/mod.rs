@@ -401,15 +401,17 @@ impl Hierarchy {
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<BuiltHierarchy, NeedsEntries> {
         let mut unrefined = Hierarchy::cluster_tree(scene);
-        unrefined.face_closed = unrefined
-            .tree
-            .face_node
-            .par_iter()
-            .enumerate()
+        unrefined.tree.collect_leaves();
+        unrefined.reach.measure(&unrefined.tree, occluders);
+        // A face light reaches nowhere (a beam's end cut off inside a wall) gathers nothing:
+        // its view is closed, to no share, without the closure's rays, each of which would
+        // test its origin's burial (on the monastery's cut faces, 8% of the CPU).
+        unrefined.face_closed = (unrefined.tree.face_node.par_iter().enumerate())
             .map(|(face, &n)| {
-                occluders
-                    .closed_view_share(unrefined.tree.element_patch(n), face)
-                    .is_some()
+                unrefined.reach.seen_share[n as usize] == 0.0
+                    || occluders
+                        .closed_view_share(unrefined.tree.element_patch(n), face)
+                        .is_some()
             })
             .collect();
         unrefined.index(occluders);

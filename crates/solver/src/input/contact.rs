@@ -12,18 +12,12 @@
 //! piece stays convex and the cuts stay near the contacts. The pieces keep the face's
 //! material, object and orientation and name it as their source ([`Face::source`]).
 
+use super::lines::{EdgeGrid, Line, RELATIVE_TOLERANCE, crosses_interior, side};
+use super::section;
 use crate::geometry::{Polygon, bounds, convex_pieces};
 use crate::scene::{Face, Scene};
 use glam::DVec3;
 use rayon::prelude::*;
-use std::collections::HashMap;
-
-/// Distances below this fraction of a face's radius count as zero: an edge this close to a
-/// plane lies in it, and a cut leaving a piece thinner than this is not made.
-const RELATIVE_TOLERANCE: f64 = 1e-6;
-
-/// Most grid cells along the scene's longest side: bounds the grid whatever the face sizes.
-const MAX_CELLS_PER_SIDE: f64 = 1024.0;
 
 /// Most pieces a face is cut into per contact segment on it. A segment quarters about two
 /// cells a level and cuts the last ones: a few dozen pieces.
@@ -41,25 +35,35 @@ pub(crate) fn split_at_contacts(scene: &mut Scene) {
     scene.triangles_before_cuts = triangles;
 }
 
-/// `faces` with every face cut along the contact segments of the faces that stand on it, and
-/// how many faces were cut. Pieces of one face follow one another, in the face's place. Faces
+/// `faces` with every face cut along the contact segments of the faces that stand on it (and,
+/// first, a large face along the sections that run across it: [`section`]), and how many faces
+/// were cut. Pieces of one face follow one another, in the face's place. Faces
 /// are cut in parallel (on the 125k-triangle monastery the cuts were most of its serial load).
-fn split_faces_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
+pub(super) fn split_faces_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
     let grid = EdgeGrid::new(&faces);
+    let partners = section::crossing_partners(&faces, &grid);
+    let sectioned_area = section::MIN_AREA_IN_MEDIANS * grid.median_area;
     let cut_faces: Vec<(Vec<Polygon>, bool)> = (0..faces.len())
         .into_par_iter()
         .map(|index| {
             let face = &faces[index];
+            let normal = face.polygon.normal();
             let segments = contact_segments(&faces, index, &grid);
-            let mut pieces = cut_locally(
-                face.polygon.corners().to_vec(),
-                face.polygon.normal(),
-                &segments,
-                0,
-            );
+            let sections = match face.polygon.area() >= sectioned_area {
+                true => section::spanning_sections(&faces, index, &partners[index]),
+                false => Vec::new(),
+            };
+            // The sections' whole lines first, then each convex piece around its contacts.
+            let tolerance = RELATIVE_TOLERANCE * face.polygon.radius();
+            let mut pieces: Vec<Vec<DVec3>> =
+                cut_along(face.polygon.corners(), normal, &sections, tolerance)
+                    .into_iter()
+                    .flat_map(|piece| convex_pieces(&without_straight_corners(piece)))
+                    .flat_map(|piece| cut_locally(piece.corners().to_vec(), normal, &segments, 0))
+                    .collect();
             // A bound whatever the input: past it the face stays whole, as before contact
             // lines.
-            if pieces.len() > MAX_PIECES_PER_SEGMENT * segments.len() {
+            if pieces.len() > MAX_PIECES_PER_SEGMENT * (segments.len() + sections.len()) {
                 pieces = vec![face.polygon.corners().to_vec()];
             }
             let cut = pieces.len() > 1;
@@ -79,117 +83,6 @@ fn split_faces_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
         }));
     }
     (split, cut)
-}
-
-/// Every face's edges, by the grid cells their bounding boxes cover.
-struct EdgeGrid {
-    origin: DVec3,
-    cell: f64,
-    cells: HashMap<[i64; 3], Vec<(u32, u8)>>,
-}
-
-impl EdgeGrid {
-    fn new(faces: &[Face]) -> EdgeGrid {
-        let (lo, hi) = bounds(
-            faces
-                .iter()
-                .flat_map(|f| f.polygon.corners().iter().copied()),
-        );
-        let side = (hi - lo).max_element().max(f64::MIN_POSITIVE);
-        // The median face's size, not the mean's: a ground of hundreds of square metres under
-        // a model of centimetre triangles made the mean's cells hold thousands of edges each,
-        // and finding the contacts took 7 of the 7.8 s a 13,776-triangle teddy bear took to load
-        // (0.7 s now).
-        let mut areas: Vec<f64> = faces.iter().map(|f| f.polygon.area()).collect();
-        let middle = areas.len() / 2;
-        let median_area = match areas.is_empty() {
-            true => 0.0,
-            false => *areas.select_nth_unstable_by(middle, f64::total_cmp).1,
-        };
-        let mut grid = EdgeGrid {
-            origin: lo,
-            cell: median_area.sqrt().max(side / MAX_CELLS_PER_SIDE),
-            cells: HashMap::new(),
-        };
-        for (f, face) in faces.iter().enumerate() {
-            let corners = face.polygon.corners();
-            for k in 0..corners.len() {
-                let (p, q) = (corners[k], corners[(k + 1) % corners.len()]);
-                // Along the edge a cell at a time: a long slanted edge's box would span a
-                // cube of cells.
-                let steps = (p.distance(q) / grid.cell)
-                    .ceil()
-                    .clamp(1.0, 4.0 * MAX_CELLS_PER_SIDE);
-                let mut keys: Vec<[i64; 3]> = (0..steps as usize)
-                    .flat_map(|i| {
-                        let (a, b) = (
-                            p.lerp(q, i as f64 / steps),
-                            p.lerp(q, (i + 1) as f64 / steps),
-                        );
-                        grid.keys(a.min(b), a.max(b))
-                    })
-                    .collect();
-                keys.sort_unstable();
-                keys.dedup();
-                for key in keys {
-                    grid.cells.entry(key).or_default().push((f as u32, k as u8));
-                }
-            }
-        }
-        grid
-    }
-
-    /// How many cells the box from `lo` to `hi` covers.
-    fn cell_count(&self, lo: DVec3, hi: DVec3) -> f64 {
-        let at = |p: DVec3| ((p - self.origin) / self.cell).floor();
-        let span = at(hi) - at(lo) + DVec3::ONE;
-        span.x * span.y * span.z
-    }
-
-    /// The cell holding `p`.
-    fn key(&self, p: DVec3) -> [i64; 3] {
-        ((p - self.origin) / self.cell)
-            .floor()
-            .as_i64vec3()
-            .to_array()
-    }
-
-    /// The cells a box from `lo` to `hi` covers.
-    fn keys(&self, lo: DVec3, hi: DVec3) -> impl Iterator<Item = [i64; 3]> {
-        let (a, b) = (self.key(lo), self.key(hi));
-        (a[0]..=b[0]).flat_map(move |x| {
-            (a[1]..=b[1]).flat_map(move |y| (a[2]..=b[2]).map(move |z| [x, y, z]))
-        })
-    }
-
-    /// The edges near the box from `lo` to `hi`, each once.
-    fn edges_near(&self, lo: DVec3, hi: DVec3) -> Vec<(u32, u8)> {
-        let mut edges: Vec<(u32, u8)> = if self.cell_count(lo, hi) > self.cells.len() as f64 {
-            // A box wider than the occupied grid (a large slanted face): the occupied cells in it.
-            let (a, b) = (self.key(lo), self.key(hi));
-            self.cells
-                .iter()
-                .filter(|(key, _)| (0..3).all(|i| a[i] <= key[i] && key[i] <= b[i]))
-                .flat_map(|(_, edges)| edges.iter().copied())
-                .collect()
-        } else {
-            self.keys(lo, hi)
-                .filter_map(|key| self.cells.get(&key))
-                .flatten()
-                .copied()
-                .collect()
-        };
-        edges.sort_unstable();
-        edges.dedup();
-        edges
-    }
-}
-
-/// A segment in a face's plane from `point` to `point + direction`; as a cut, its whole line.
-#[derive(Clone, Copy, Debug)]
-struct Line {
-    point: DVec3,
-    direction: DVec3,
 }
 
 /// Segments crossing a cell that are cut by their whole lines without quartering it first:
@@ -231,37 +124,6 @@ fn contact_segments(faces: &[Face], index: usize, grid: &EdgeGrid) -> Vec<Line> 
         }
     }
     lines
-}
-
-/// Whether the segment `p`..`q` (in the plane of the convex polygon `corners`, normal
-/// `normal`) runs through the polygon's interior for longer than `tolerance`, and its line
-/// leaves corners on both sides (a segment along an edge cuts nothing).
-fn crosses_interior(corners: &[DVec3], normal: DVec3, p: DVec3, q: DVec3, tolerance: f64) -> bool {
-    let line = Line {
-        point: p,
-        direction: q - p,
-    };
-    let sides: Vec<f64> = corners.iter().map(|c| side(line, normal, *c)).collect();
-    if !(sides.iter().any(|s| *s > tolerance) && sides.iter().any(|s| *s < -tolerance)) {
-        return false;
-    }
-    // Cyrus-Beck: the part of the segment inside every edge's half-plane.
-    let (mut enter, mut leave) = (0.0f64, 1.0f64);
-    for k in 0..corners.len() {
-        let (a, b) = (corners[k], corners[(k + 1) % corners.len()]);
-        let inward = normal.cross(b - a);
-        let (start, rate) = ((p - a).dot(inward), (q - p).dot(inward));
-        if rate == 0.0 {
-            if start < 0.0 {
-                return false;
-            }
-        } else if rate > 0.0 {
-            enter = enter.max(-start / rate);
-        } else {
-            leave = leave.min(-start / rate);
-        }
-    }
-    (leave - enter) * (q - p).length() > tolerance
 }
 
 /// The convex `cell` (of a face with normal `normal`) cut along `segments` locally: quartered
@@ -316,12 +178,6 @@ fn quarters(cell: &[DVec3]) -> Vec<Vec<DVec3>> {
         }
         _ => vec![cell.to_vec()],
     }
-}
-
-/// Signed distance of `x` from `line`, in the plane of normal `normal` (positive on the left
-/// of its direction seen from the front).
-fn side(line: Line, normal: DVec3, x: DVec3) -> f64 {
-    line.direction.cross(x - line.point).dot(normal) / line.direction.length()
 }
 
 /// The convex polygon `corners` cut by each of `lines` that crosses it: convex pieces, their

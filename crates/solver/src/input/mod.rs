@@ -1,11 +1,14 @@
 //! Scene files in: OBJ + MTL ([`obj`]) and glTF 2.0 ([`gltf`]), with their texture images
 //! ([`image`]), read into a [`Scene`], then the steps every loader ends with ([`finish`]):
-//! degenerate faces dropped and faces cut along contact lines ([`contact`]).
+//! degenerate faces dropped, faces cut along contact lines ([`contact`]) and along the faces
+//! running across them ([`section`]).
 
 pub(crate) mod contact;
 mod gltf;
 mod image;
+mod lines;
 mod obj;
+mod section;
 
 use crate::scene::Scene;
 use std::path::{Path, PathBuf};
@@ -93,7 +96,8 @@ pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
 
 /// What every loader ends with: degenerate faces dropped (an emitter among them is an
 /// error), a scene left with nothing to light refused, and faces cut along the contact
-/// lines of what stands on them ([`contact`]).
+/// lines of what stands on them ([`contact`]) and the faces running across them
+/// ([`section`]).
 pub(crate) fn finish(mut scene: Scene, path: &Path) -> Result<Scene, SceneError> {
     if let Some(object) = scene.drop_degenerate_faces() {
         return Err(SceneError::EmitterTooSmall {
