@@ -67,11 +67,7 @@ pub(super) fn split_faces_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
                 pieces = vec![face.polygon.corners().to_vec()];
             }
             let cut = pieces.len() > 1;
-            let convex = pieces
-                .into_iter()
-                .flat_map(|piece| convex_pieces(&without_straight_corners(piece)))
-                .collect();
-            (convex, cut)
+            (with_area(pieces, face.polygon.area()), cut)
         })
         .collect();
     let cut = cut_faces.iter().filter(|(_, cut)| *cut).count();
@@ -93,6 +89,16 @@ const FEW_SEGMENTS: usize = 16;
 
 /// Deepest quartering of a face around its contact segments ([`cut_locally`]).
 const MAX_CELL_DEPTH: u32 = 16;
+
+/// The pieces of a face of area `area` as convex polygons, but those of no area next to it (a
+/// fan triangle of corners a cut left in line): a leaf of no area has no mean, and one sent
+/// the leaves' solve to NaN.
+fn with_area(pieces: Vec<Vec<DVec3>>, area: f64) -> Vec<Polygon> {
+    (pieces.into_iter())
+        .flat_map(|piece| convex_pieces(&without_straight_corners(piece)))
+        .filter(|piece| piece.area() > RELATIVE_TOLERANCE * RELATIVE_TOLERANCE * area)
+        .collect()
+}
 
 /// The contact segments on face `index`: edges of faces that stand in front of it, not in its
 /// plane, lying in its plane and crossing its interior.
@@ -364,6 +370,26 @@ mod tests {
         scene.add_polygon(sliver, &[DVec3::ZERO, far, far + DVec3::Z * 1e-3], grey);
         let (faces, cut) = split_faces_at_contacts(scene.faces.clone());
         assert_eq!((faces.len(), cut), (scene.faces.len(), 0));
+    }
+
+    #[test]
+    fn pieces_of_no_area_are_dropped() {
+        let (a, b, c) = (DVec3::ZERO, DVec3::X, DVec3::Z);
+        // A triangle whose corners lie in line has no area and goes; a sliver 1e-5 wide, a
+        // real piece, stays.
+        let pieces = vec![
+            vec![a, b, c],
+            vec![a, b, b * 2.0],
+            vec![a, b, dvec3(1.0, 0.0, 1e-5)],
+        ];
+        let kept = with_area(pieces, 0.5);
+        assert_eq!(kept.len(), 2);
+        assert_eq!(kept[0].area(), 0.5);
+        assert!(
+            (kept[1].area() - 0.5e-5).abs() < 1e-18,
+            "{}",
+            kept[1].area()
+        );
     }
 
     #[test]
