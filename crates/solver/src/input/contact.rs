@@ -12,9 +12,9 @@
 //! piece stays convex and the cuts stay near the contacts. The pieces keep the face's
 //! material, object and orientation and name it as their source ([`Face::source`]).
 
-use super::lines::{EdgeGrid, Line, RELATIVE_TOLERANCE, crosses_interior, side};
+use super::lines::{EdgeGrid, FacePlane, Line, RELATIVE_TOLERANCE, crosses_interior, side};
 use super::section;
-use crate::geometry::{Polygon, bounds, convex_pieces};
+use crate::geometry::{Polygon, convex_pieces};
 use crate::scene::{Face, Scene};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -104,13 +104,10 @@ fn with_area(pieces: Vec<Vec<DVec3>>, area: f64) -> Vec<Polygon> {
 /// plane, lying in its plane and crossing its interior.
 fn contact_segments(faces: &[Face], index: usize, grid: &EdgeGrid) -> Vec<Line> {
     let face = &faces[index].polygon;
-    let (normal, corners) = (face.normal(), face.corners());
-    let tolerance = RELATIVE_TOLERANCE * face.radius();
-    let height = |p: DVec3| (p - corners[0]).dot(normal);
-    let (lo, hi) = bounds(corners.iter().copied());
-    let margin = DVec3::splat(tolerance);
+    let plane = FacePlane::of(face);
+    let (normal, corners, tolerance) = (plane.normal, plane.corners, plane.tolerance);
     let mut lines = Vec::new();
-    for (other, k) in grid.edges_near(lo - margin, hi + margin) {
+    for (other, k) in grid.edges_near_face(&plane) {
         let standing = &faces[other as usize].polygon;
         if other as usize == index || standing.normal().dot(normal).abs() > 1.0 - 1e-9 {
             continue;
@@ -120,8 +117,8 @@ fn contact_segments(faces: &[Face], index: usize, grid: &EdgeGrid) -> Vec<Line> 
         // In the plane to a part in a million of the edge itself, not of the face: within a
         // million-metre face's tolerance, a lamp a metre above it lay "in" it.
         let flat = RELATIVE_TOLERANCE * p.distance(q).min(face.radius());
-        let in_plane = height(p).abs() <= flat && height(q).abs() <= flat;
-        let in_front = c.iter().any(|v| height(*v) > tolerance);
+        let in_plane = plane.height(p).abs() <= flat && plane.height(q).abs() <= flat;
+        let in_front = c.iter().any(|v| plane.height(*v) > tolerance);
         if in_plane && in_front && crosses_interior(corners, normal, p, q, tolerance) {
             lines.push(Line {
                 point: p,

@@ -1,7 +1,7 @@
 //! Lines in a face's plane, and the grid that finds the edges near a face: what contact lines
 //! ([`super::contact`]) and sections ([`super::section`]) are both found and cut with.
 
-use crate::geometry::bounds;
+use crate::geometry::{Polygon, bounds};
 use crate::scene::Face;
 use glam::DVec3;
 use std::collections::HashMap;
@@ -12,6 +12,29 @@ pub(super) const RELATIVE_TOLERANCE: f64 = 1e-6;
 
 /// Most grid cells along the scene's longest side: bounds the grid whatever the face sizes.
 const MAX_CELLS_PER_SIDE: f64 = 1024.0;
+
+/// A face's plane as the cuts read it: its corners, normal, and the distance below which an
+/// offset from it counts as zero ([`RELATIVE_TOLERANCE`] of its radius).
+pub(super) struct FacePlane<'a> {
+    pub(super) corners: &'a [DVec3],
+    pub(super) normal: DVec3,
+    pub(super) tolerance: f64,
+}
+
+impl<'a> FacePlane<'a> {
+    pub(super) fn of(polygon: &'a Polygon) -> Self {
+        FacePlane {
+            corners: polygon.corners(),
+            normal: polygon.normal(),
+            tolerance: RELATIVE_TOLERANCE * polygon.radius(),
+        }
+    }
+
+    /// Signed distance of `p` from the plane, positive in front.
+    pub(super) fn height(&self, p: DVec3) -> f64 {
+        (p - self.corners[0]).dot(self.normal)
+    }
+}
 
 /// Every face's edges, by the grid cells their bounding boxes cover.
 pub(super) struct EdgeGrid {
@@ -97,8 +120,16 @@ impl EdgeGrid {
         })
     }
 
+    /// The edges near the face of `plane` (within its tolerance of its bounding box), each
+    /// once.
+    pub(super) fn edges_near_face(&self, plane: &FacePlane) -> Vec<(u32, u8)> {
+        let (lo, hi) = bounds(plane.corners.iter().copied());
+        let margin = DVec3::splat(plane.tolerance);
+        self.edges_near(lo - margin, hi + margin)
+    }
+
     /// The edges near the box from `lo` to `hi`, each once.
-    pub(super) fn edges_near(&self, lo: DVec3, hi: DVec3) -> Vec<(u32, u8)> {
+    fn edges_near(&self, lo: DVec3, hi: DVec3) -> Vec<(u32, u8)> {
         let mut edges: Vec<(u32, u8)> = if self.cell_count(lo, hi) > self.cells.len() as f64 {
             // A box wider than the occupied grid (a large slanted face): the occupied cells in it.
             let (a, b) = (self.key(lo), self.key(hi));

@@ -10,8 +10,7 @@
 //! Measured on the monastery (docs/BENCHMARKS.md, 2026-12-06 evening): smooth RMS 5.10 / 5.25
 //! / 5.45% -> 4.21 / 4.36 / 4.15% (seeds 0-2), a quarter more time, 1.6 -> 1.9 GB.
 
-use super::lines::{EdgeGrid, Line, RELATIVE_TOLERANCE, chord, crosses_interior};
-use crate::geometry::bounds;
+use super::lines::{EdgeGrid, FacePlane, Line, chord, crosses_interior};
 use crate::scene::Face;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -36,13 +35,10 @@ pub(super) fn crossing_partners(faces: &[Face], grid: &EdgeGrid) -> Vec<Vec<u32>
     let pierced: Vec<Vec<u32>> = (0..faces.len())
         .into_par_iter()
         .map(|index| {
-            let face = &faces[index].polygon;
-            let (normal, corners) = (face.normal(), face.corners());
-            let tolerance = RELATIVE_TOLERANCE * face.radius();
-            let height = |p: DVec3| (p - corners[0]).dot(normal);
-            let (lo, hi) = bounds(corners.iter().copied());
-            let margin = DVec3::splat(tolerance);
-            let mut by: Vec<u32> = (grid.edges_near(lo - margin, hi + margin).into_iter())
+            let plane = FacePlane::of(&faces[index].polygon);
+            let (normal, corners, tolerance) = (plane.normal, plane.corners, plane.tolerance);
+            let height = |p: DVec3| plane.height(p);
+            let mut by: Vec<u32> = (grid.edges_near_face(&plane).into_iter())
                 .filter(|&(other, k)| {
                     let c = faces[other as usize].polygon.corners();
                     let (p, q) = (c[k as usize], c[(k as usize + 1) % c.len()]);
@@ -85,10 +81,9 @@ fn strictly_inside(corners: &[DVec3], normal: DVec3, x: DVec3, tolerance: f64) -
 /// The sections of face `index` by the faces crossing it (`partners`) that run along at
 /// least [`SPANNING_SHARE`] of their line's chord through it, as lines to cut it by.
 pub(super) fn spanning_sections(faces: &[Face], index: usize, partners: &[u32]) -> Vec<Line> {
-    let face = &faces[index].polygon;
-    let (normal, corners) = (face.normal(), face.corners());
-    let tolerance = RELATIVE_TOLERANCE * face.radius();
-    let height = |p: DVec3| (p - corners[0]).dot(normal);
+    let plane = FacePlane::of(&faces[index].polygon);
+    let (normal, corners, tolerance) = (plane.normal, plane.corners, plane.tolerance);
+    let height = |p: DVec3| plane.height(p);
     let mut lines = Vec::new();
     for &other in partners {
         let crossing = &faces[other as usize].polygon;
@@ -127,33 +122,11 @@ pub(super) fn spanning_sections(faces: &[Face], index: usize, partners: &[u32]) 
 #[cfg(test)]
 mod tests {
     use super::super::contact::split_faces_at_contacts;
-    use crate::scene::{Face, Material, Rgb, Scene};
+    use crate::hierarchy::fixtures::{GREY, add_parallelogram};
+    use crate::scene::{Face, Scene};
     use glam::{DVec3, dvec3};
 
-    const GREY: Material = Material {
-        reflectance: Rgb::splat(0.5),
-        emission: Rgb::ZERO,
-    };
-
-    /// `scene` with three 0.1 x 0.1 tiles far away, so that the median face is small.
-    fn with_small_tiles(mut scene: Scene) -> Scene {
-        let tiles = scene.add_object("tiles");
-        for i in 0..3 {
-            let o = dvec3(50.0 + i as f64, 0.0, 50.0);
-            scene.add_polygon(
-                tiles,
-                &[
-                    o,
-                    o + DVec3::Z * 0.1,
-                    o + dvec3(0.1, 0.0, 0.1),
-                    o + DVec3::X * 0.1,
-                ],
-                GREY,
-            );
-        }
-        scene
-    }
-
+    /// The areas of the pieces of object `object`, smallest first.
     fn areas(faces: &[Face], object: u32) -> Vec<f64> {
         let mut areas: Vec<f64> = (faces.iter())
             .filter(|f| f.object == object)
@@ -165,41 +138,31 @@ mod tests {
 
     #[test]
     fn a_wall_and_a_shelf_through_it_are_cut_along_the_line_they_cross_on() {
-        // A 4 x 4 wall in the plane z = 0 and a 6 x 2 shelf at y = 1 running through it,
-        // from x = -1 to 5 and z = -1 to 1: each runs across the other.
+        // A 4 x 4 wall (object 0) in the plane z = 0 and a 6 x 2 shelf (object 1) at y = 1
+        // running through it, from x = -1 to 5 and z = -1 to 1: each runs across the other.
+        // Three 0.1 x 0.1 tiles far away make the median face small.
+        let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
         let mut scene = Scene::default();
-        let wall = scene.add_object("wall");
-        scene.add_polygon(
-            wall,
-            &[
-                DVec3::ZERO,
-                DVec3::X * 4.0,
-                dvec3(4.0, 4.0, 0.0),
-                DVec3::Y * 4.0,
-            ],
+        add_parallelogram(&mut scene, "wall", (DVec3::ZERO, x * 4.0, y * 4.0), GREY);
+        add_parallelogram(
+            &mut scene,
+            "shelf",
+            (dvec3(-1.0, 1.0, -1.0), z * 2.0, x * 6.0),
             GREY,
         );
-        let shelf = scene.add_object("shelf");
-        let (a, b) = (dvec3(-1.0, 1.0, -1.0), dvec3(5.0, 1.0, 1.0));
-        scene.add_polygon(
-            shelf,
-            &[a, dvec3(a.x, 1.0, b.z), b, dvec3(b.x, 1.0, a.z)],
-            GREY,
-        );
-        let scene = with_small_tiles(scene);
+        for i in 0..3 {
+            let o = dvec3(50.0 + i as f64, 0.0, 50.0);
+            add_parallelogram(&mut scene, "tile", (o, z * 0.1, x * 0.1), GREY);
+        }
         let (faces, cut) = split_faces_at_contacts(scene.faces.clone());
         assert_eq!(cut, 2, "the wall and the shelf");
+        assert_eq!(areas(&faces, 0), [4.0, 12.0], "below and above the shelf");
         assert_eq!(
-            areas(&faces, wall),
-            [4.0, 12.0],
-            "below and above the shelf"
-        );
-        assert_eq!(
-            areas(&faces, shelf),
+            areas(&faces, 1),
             [6.0, 6.0],
             "in front of and behind the wall"
         );
-        for piece in faces.iter().filter(|f| f.object == wall) {
+        for piece in faces.iter().filter(|f| f.object == 0) {
             let c = piece.polygon.corners();
             assert!(
                 c.iter().all(|p| p.y <= 1.0) || c.iter().all(|p| p.y >= 1.0),
@@ -213,29 +176,22 @@ mod tests {
         // A post 0.2 m across from y = -1 to 1 through a 10 x 10 floor: its sides' sections
         // close a footprint inside the floor, each along 2% of its line's chord; the floor
         // runs across each side, whose area (0.4 m^2, the median) is too small to cut.
+        let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
         let mut scene = Scene::default();
-        let floor = scene.add_object("floor");
-        let o = dvec3(-5.0, 0.0, -5.0);
-        scene.add_polygon(
-            floor,
-            &[
-                o,
-                o + DVec3::Z * 10.0,
-                o + dvec3(10.0, 0.0, 10.0),
-                o + DVec3::X * 10.0,
-            ],
+        add_parallelogram(
+            &mut scene,
+            "floor",
+            (dvec3(-5.0, 0.0, -5.0), z * 10.0, x * 10.0),
             GREY,
         );
-        let post = scene.add_object("post");
-        let (low, high) = (-0.1, 0.1);
-        for (p, q) in [
-            (dvec3(low, 0.0, low), dvec3(high, 0.0, low)),
-            (dvec3(high, 0.0, low), dvec3(high, 0.0, high)),
-            (dvec3(high, 0.0, high), dvec3(low, 0.0, high)),
-            (dvec3(low, 0.0, high), dvec3(low, 0.0, low)),
+        let (corner, side) = (dvec3(-0.1, -1.0, -0.1), 0.2);
+        for (o, u) in [
+            (corner, x * side),
+            (corner + x * side, z * side),
+            (corner + (x + z) * side, -x * side),
+            (corner + z * side, -z * side),
         ] {
-            let down = -DVec3::Y;
-            scene.add_polygon(post, &[p + down, q + down, q - down, p - down], GREY);
+            add_parallelogram(&mut scene, "post", (o, u, y * 2.0), GREY);
         }
         let (faces, cut) = split_faces_at_contacts(scene.faces.clone());
         assert_eq!((faces.len(), cut), (5, 0));
