@@ -41,18 +41,15 @@ pub(crate) fn split_at_contacts(scene: &mut Scene) {
 /// are cut in parallel (on the 125k-triangle monastery the cuts were most of its serial load).
 pub(super) fn split_faces_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
     let grid = EdgeGrid::new(&faces);
-    let partners = section::crossing_partners(&faces, &grid);
     let sectioned_area = section::MIN_AREA_IN_MEDIANS * grid.median_area;
+    let partners = section::crossing_partners(&faces, &grid, sectioned_area);
     let cut_faces: Vec<(Vec<Polygon>, bool)> = (0..faces.len())
         .into_par_iter()
         .map(|index| {
             let face = &faces[index];
             let normal = face.polygon.normal();
             let segments = contact_segments(&faces, index, &grid);
-            let sections = match face.polygon.area() >= sectioned_area {
-                true => section::spanning_sections(&faces, index, &partners[index]),
-                false => Vec::new(),
-            };
+            let sections = section::spanning_sections(&faces, index, &partners[index]);
             // The sections' whole lines first, then each convex piece around its contacts.
             let tolerance = RELATIVE_TOLERANCE * face.polygon.radius();
             let mut pieces: Vec<Vec<DVec3>> =

@@ -8,7 +8,7 @@
 //! that pass through one another, as real models' faces do.
 //!
 //! Measured on the monastery (docs/BENCHMARKS.md, 2026-12-06 evening): smooth RMS 5.10 / 5.25
-//! / 5.45% -> 4.21 / 4.36 / 4.15% (seeds 0-2), a quarter more time, 1.6 -> 1.9 GB.
+//! / 5.45% -> 4.06 / 4.34 / 4.30% (seeds 0-2), a quarter more time, 1.6 -> 1.9 GB.
 
 use super::lines::{EdgeGrid, FacePlane, Line, chord, crosses_interior};
 use crate::scene::Face;
@@ -28,10 +28,12 @@ pub(super) const MIN_AREA_IN_MEDIANS: f64 = 4.0;
 /// against 4.39% at half).
 const SPANNING_SHARE: f64 = 0.5;
 
-/// Per face, the faces crossing it: pairs where an edge of one passes through the interior of
-/// the other (two convex faces that cross meet so, one way or the other), found with the
-/// contact lines' edge grid.
-pub(super) fn crossing_partners(faces: &[Face], grid: &EdgeGrid) -> Vec<Vec<u32>> {
+/// Per face of at least `min_area` (empty for the others, which are not cut by sections), the
+/// faces crossing it: pairs where an edge of one passes through the interior of the other (two
+/// convex faces that cross meet so, one way or the other), found with the contact lines' edge
+/// grid.
+pub(super) fn crossing_partners(faces: &[Face], grid: &EdgeGrid, min_area: f64) -> Vec<Vec<u32>> {
+    let large = |f: usize| faces[f].polygon.area() >= min_area;
     let pierced: Vec<Vec<u32>> = (0..faces.len())
         .into_par_iter()
         .map(|index| {
@@ -46,6 +48,7 @@ pub(super) fn crossing_partners(faces: &[Face], grid: &EdgeGrid) -> Vec<Vec<u32>
                     let through =
                         (a > tolerance && b < -tolerance) || (a < -tolerance && b > tolerance);
                     other as usize != index
+                        && (large(index) || large(other as usize))
                         && through
                         && strictly_inside(corners, normal, p + (q - p) * (a / (a - b)), tolerance)
                 })
@@ -55,10 +58,15 @@ pub(super) fn crossing_partners(faces: &[Face], grid: &EdgeGrid) -> Vec<Vec<u32>
             by
         })
         .collect();
-    let mut partners = pierced.clone();
-    for (index, by) in pierced.iter().enumerate() {
-        for &other in by {
-            partners[other as usize].push(index as u32);
+    let mut partners = vec![Vec::new(); faces.len()];
+    for (index, by) in pierced.into_iter().enumerate() {
+        for other in by {
+            if large(index) {
+                partners[index].push(other);
+            }
+            if large(other as usize) {
+                partners[other as usize].push(index as u32);
+            }
         }
     }
     for list in &mut partners {
@@ -106,8 +114,8 @@ pub(super) fn spanning_sections(faces: &[Face], index: usize, partners: &[u32]) 
             continue;
         };
         let along = (chord_leave.min(1.0) - chord_enter.max(0.0)).max(0.0);
-        if along * p.distance(q) > tolerance
-            && along >= SPANNING_SHARE * (chord_leave - chord_enter)
+        // `crosses_interior` also asks the part inside to be longer than the tolerance.
+        if along >= SPANNING_SHARE * (chord_leave - chord_enter)
             && crosses_interior(corners, normal, p, q, tolerance)
         {
             lines.push(Line {
