@@ -41,14 +41,26 @@ pub(crate) fn split_at_contacts(scene: &mut Scene) {
 /// are cut in parallel (on the 125k-triangle monastery the cuts were most of its serial load).
 pub(super) fn split_faces_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
     let grid = EdgeGrid::new(&faces);
-    let sectioned_area = section::MIN_AREA_IN_MEDIANS * grid.median_area;
-    let partners = section::crossing_partners(&faces, &grid, sectioned_area);
+    let large = section::large_faces(&faces, section::MIN_AREA_IN_MEDIANS * grid.median_area);
+    // One look at the edges near each face finds what stands on it and what crosses it.
+    let (segments, pierced): (Vec<Vec<Line>>, Vec<Vec<u32>>) = (0..faces.len())
+        .into_par_iter()
+        .map(|index| {
+            let plane = FacePlane::of(&faces[index].polygon);
+            let near = grid.edges_near_face(&plane);
+            (
+                contact_segments(&faces, (index, &plane), &near),
+                section::pierced_by(&faces, (index, &plane), &near, &large),
+            )
+        })
+        .unzip();
+    let partners = section::crossing_partners(pierced, &large);
     let cut_faces: Vec<(Vec<Polygon>, bool)> = (0..faces.len())
         .into_par_iter()
         .map(|index| {
             let face = &faces[index];
             let normal = face.polygon.normal();
-            let segments = contact_segments(&faces, index, &grid);
+            let segments = &segments[index];
             let sections = section::spanning_sections(&faces, index, &partners[index]);
             // The sections' whole lines first, then each convex piece around its contacts.
             let tolerance = RELATIVE_TOLERANCE * face.polygon.radius();
@@ -56,7 +68,7 @@ pub(super) fn split_faces_at_contacts(faces: Vec<Face>) -> (Vec<Face>, usize) {
                 cut_along(face.polygon.corners(), normal, &sections, tolerance)
                     .into_iter()
                     .flat_map(|piece| convex_pieces(&without_straight_corners(piece)))
-                    .flat_map(|piece| cut_locally(piece.corners().to_vec(), normal, &segments, 0))
+                    .flat_map(|piece| cut_locally(piece.corners().to_vec(), normal, segments, 0))
                     .collect();
             // A bound whatever the input: past it the face stays whole, as before contact
             // lines.
@@ -97,14 +109,18 @@ fn with_area(pieces: Vec<Vec<DVec3>>, area: f64) -> Vec<Polygon> {
         .collect()
 }
 
-/// The contact segments on face `index`: edges of faces that stand in front of it, not in its
-/// plane, lying in its plane and crossing its interior.
-fn contact_segments(faces: &[Face], index: usize, grid: &EdgeGrid) -> Vec<Line> {
+/// The contact segments on face `index` (`plane`): edges among `near` (the edges near it) of
+/// faces that stand in front of it, not in its plane, lying in its plane and crossing its
+/// interior.
+fn contact_segments(
+    faces: &[Face],
+    (index, plane): (usize, &FacePlane),
+    near: &[(u32, u8)],
+) -> Vec<Line> {
     let face = &faces[index].polygon;
-    let plane = FacePlane::of(face);
     let (normal, corners, tolerance) = (plane.normal, plane.corners, plane.tolerance);
     let mut lines = Vec::new();
-    for (other, k) in grid.edges_near_face(&plane) {
+    for &(other, k) in near {
         let standing = &faces[other as usize].polygon;
         if other as usize == index || standing.normal().dot(normal).abs() > 1.0 - 1e-9 {
             continue;

@@ -10,8 +10,13 @@ use std::collections::HashMap;
 /// plane lies in it, and a cut leaving a piece thinner than this is not made.
 pub(super) const RELATIVE_TOLERANCE: f64 = 1e-6;
 
-/// Most grid cells along the scene's longest side: bounds the grid whatever the face sizes.
-const MAX_CELLS_PER_SIDE: f64 = 1024.0;
+/// Most grid cells along the scene's longest side, per square root of its face count: bounds
+/// the grid whatever the face sizes, and grows with the faces as a surface does (a model's
+/// faces spread over its extent's area). Measured loading (docs/BENCHMARKS.md): at a fixed
+/// 1,024 a side the 1M-triangle village's cells held hundreds of edges each and its cuts took
+/// 24 s; with 2,048 / 4,096 a side 16 / 15 s, while the 126k-face monastery loaded in 1.8 s at
+/// 1,024 and 2.1 / 2.9 s at 2,048 / 4,096 (its large faces' boxes cover more empty cells).
+const CELLS_PER_ROOT_FACE: f64 = 3.0;
 
 /// A face's plane as the cuts read it: its corners, normal, and the distance below which an
 /// offset from it counts as zero ([`RELATIVE_TOLERANCE`] of its radius).
@@ -63,10 +68,11 @@ impl EdgeGrid {
             true => 0.0,
             false => *areas.select_nth_unstable_by(middle, f64::total_cmp).1,
         };
+        let most_cells_per_side = CELLS_PER_ROOT_FACE * (faces.len() as f64).sqrt().max(1.0);
         let mut grid = EdgeGrid {
             median_area,
             origin: lo,
-            cell: median_area.sqrt().max(side / MAX_CELLS_PER_SIDE),
+            cell: median_area.sqrt().max(side / most_cells_per_side),
             cells: HashMap::new(),
         };
         for (f, face) in faces.iter().enumerate() {
@@ -77,7 +83,7 @@ impl EdgeGrid {
                 // cube of cells.
                 let steps = (p.distance(q) / grid.cell)
                     .ceil()
-                    .clamp(1.0, 4.0 * MAX_CELLS_PER_SIDE);
+                    .clamp(1.0, 4.0 * most_cells_per_side);
                 let mut keys: Vec<[i64; 3]> = (0..steps as usize)
                     .flat_map(|i| {
                         let (a, b) = (

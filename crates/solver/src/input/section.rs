@@ -10,10 +10,9 @@
 //! Measured on the monastery (docs/BENCHMARKS.md, 2026-12-06 evening): smooth RMS 5.10 / 5.25
 //! / 5.45% -> 4.06 / 4.34 / 4.30% (seeds 0-2), a quarter more time, 1.6 -> 1.9 GB.
 
-use super::lines::{EdgeGrid, FacePlane, Line, chord, crosses_interior};
+use super::lines::{FacePlane, Line, chord, crosses_interior};
 use crate::scene::Face;
 use glam::DVec3;
-use rayon::prelude::*;
 
 /// Least area a face must have, in median face areas, to be cut along its sections: below it
 /// the pieces cost more leaves, gather points and memory than their light is worth (on the
@@ -28,43 +27,48 @@ pub(super) const MIN_AREA_IN_MEDIANS: f64 = 4.0;
 /// against 4.39% at half).
 const SPANNING_SHARE: f64 = 0.5;
 
-/// Per face of at least `min_area` (empty for the others, which are not cut by sections), the
-/// faces crossing it: pairs where an edge of one passes through the interior of the other (two
-/// convex faces that cross meet so, one way or the other), found with the contact lines' edge
-/// grid.
-pub(super) fn crossing_partners(faces: &[Face], grid: &EdgeGrid, min_area: f64) -> Vec<Vec<u32>> {
-    let large = |f: usize| faces[f].polygon.area() >= min_area;
-    let pierced: Vec<Vec<u32>> = (0..faces.len())
-        .into_par_iter()
-        .map(|index| {
-            let plane = FacePlane::of(&faces[index].polygon);
-            let (normal, corners, tolerance) = (plane.normal, plane.corners, plane.tolerance);
-            let height = |p: DVec3| plane.height(p);
-            let mut by: Vec<u32> = (grid.edges_near_face(&plane).into_iter())
-                .filter(|&(other, k)| {
-                    let c = faces[other as usize].polygon.corners();
-                    let (p, q) = (c[k as usize], c[(k as usize + 1) % c.len()]);
-                    let (a, b) = (height(p), height(q));
-                    let through =
-                        (a > tolerance && b < -tolerance) || (a < -tolerance && b > tolerance);
-                    other as usize != index
-                        && (large(index) || large(other as usize))
-                        && through
-                        && strictly_inside(corners, normal, p + (q - p) * (a / (a - b)), tolerance)
-                })
-                .map(|(other, _)| other)
-                .collect();
-            by.dedup();
-            by
+/// The faces with an edge among `near` (the edges near face `index`, whose plane is `plane`)
+/// that passes through the face's interior, where the face or the other is `large` (only
+/// those are cut by sections). Two convex faces that cross meet so, one way or the other.
+pub(super) fn pierced_by(
+    faces: &[Face],
+    (index, plane): (usize, &FacePlane),
+    near: &[(u32, u8)],
+    large: &[bool],
+) -> Vec<u32> {
+    let (normal, corners, tolerance) = (plane.normal, plane.corners, plane.tolerance);
+    let mut by: Vec<u32> = (near.iter())
+        .filter(|&&(other, k)| {
+            if other as usize == index || !(large[index] || large[other as usize]) {
+                return false;
+            }
+            let c = faces[other as usize].polygon.corners();
+            let (p, q) = (c[k as usize], c[(k as usize + 1) % c.len()]);
+            let (a, b) = (plane.height(p), plane.height(q));
+            let through = (a > tolerance && b < -tolerance) || (a < -tolerance && b > tolerance);
+            through && strictly_inside(corners, normal, p + (q - p) * (a / (a - b)), tolerance)
         })
+        .map(|&(other, _)| other)
         .collect();
-    let mut partners = vec![Vec::new(); faces.len()];
+    by.dedup();
+    by
+}
+
+/// Per face, whether it is large enough to be cut along its sections: at least `min_area`.
+pub(super) fn large_faces(faces: &[Face], min_area: f64) -> Vec<bool> {
+    faces.iter().map(|f| f.polygon.area() >= min_area).collect()
+}
+
+/// Per `large` face (empty for the others), the faces crossing it, from each face's
+/// [`pierced_by`] list: a pair counts whichever of the two faces an edge of the other pierces.
+pub(super) fn crossing_partners(pierced: Vec<Vec<u32>>, large: &[bool]) -> Vec<Vec<u32>> {
+    let mut partners = vec![Vec::new(); pierced.len()];
     for (index, by) in pierced.into_iter().enumerate() {
         for other in by {
-            if large(index) {
+            if large[index] {
                 partners[index].push(other);
             }
-            if large(other as usize) {
+            if large[other as usize] {
                 partners[other as usize].push(index as u32);
             }
         }

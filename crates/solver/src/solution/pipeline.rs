@@ -84,11 +84,18 @@ pub fn solve_scene(
             super::target::session_to_target(&scene, request, target, progress, &mut |_| {})?;
         return Ok(Solved::kept(scene, session, report));
     }
-    let start = Instant::now();
-    let mesh = starting_mesh(&scene, request)?;
-    let mesh_seconds = start.elapsed().as_secs_f64();
-    let mut session = Session::start(&scene, &mesh, request, progress)?;
-    session.add_mesh_seconds(mesh_seconds);
+    let session = match request.hierarchy {
+        // A hierarchy decides its own leaves: a mesh of one patch a face would go unused.
+        Some(_) => Session::hierarchical(&scene, request, progress)?,
+        None => {
+            let start = Instant::now();
+            let mesh = starting_mesh(&scene, request)?;
+            let mesh_seconds = start.elapsed().as_secs_f64();
+            let mut session = Session::new(&scene, &mesh, request, progress)?;
+            session.add_mesh_seconds(mesh_seconds);
+            session
+        }
+    };
     Ok(Solved::from_session(scene, session, progress))
 }
 

@@ -135,8 +135,7 @@ impl Run<'_> {
             }),
             ..*request
         };
-        let mesh = starting_mesh(scene, &first)?;
-        let mut session = Session::start(scene, &mesh, &first, self.progress)?;
+        let mut session = Session::hierarchical(scene, &first, self.progress)?;
         loop {
             let (report, stop) = self.step(&mut session, Some(knob));
             let budget = (!session.can_refine_further() || added_little(&self.report.steps))
