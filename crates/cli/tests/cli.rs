@@ -171,8 +171,8 @@ fn bad_input_exits_non_zero_with_the_reason() {
 }
 
 #[test]
-fn hierarchical_json_adds_elements_links_and_peak_memory() {
-    let (report, _) = radcast_json(&[
+fn hierarchical_json_adds_elements_links_and_peak_memory_and_says_each_stage_as_it_begins() {
+    let (report, stderr) = radcast_json(&[
         "solve",
         "scenes/cornell-box.obj",
         "--method",
@@ -194,6 +194,15 @@ fn hierarchical_json_adds_elements_links_and_peak_memory() {
     );
     assert!(report["peak_memory_bytes"].as_u64().unwrap() > 0);
     assert!(report["residual"].as_f64().unwrap() <= 1e-6);
+    // The steps that count nothing are named as they begin, in the order they run.
+    let stages = [
+        "loading scenes/cornell-box.obj: faces cut at contacts and sections",
+        "cluster tree over 54 faces",
+        "where light reaches: buried points and closed views",
+    ];
+    let at: Vec<Option<usize>> = stages.iter().map(|s| stderr.find(s)).collect();
+    assert!(at.iter().all(Option::is_some), "{stderr}");
+    assert!(at.windows(2).all(|w| w[0] < w[1]), "{stderr}");
 }
 
 #[test]

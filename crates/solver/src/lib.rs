@@ -116,6 +116,12 @@ pub enum Progress<'a> {
         /// The budget that was reached.
         limit: Limit,
     },
+    /// A step begins that counts nothing of its own: loading and cutting the faces, the
+    /// cluster tree, where light reaches. Shown as it begins, so that no minute passes unsaid.
+    Stage {
+        /// What begins, in a few words.
+        name: &'a str,
+    },
     /// What was chosen for the user, and why (`--method auto`).
     Notice {
         /// What, in one sentence.
@@ -188,7 +194,9 @@ impl Progress<'_> {
             } => {
                 format!("refinement at error {knob} would pass {limit}: going on at {next_knob}")
             }
-            Progress::Warning { text } | Progress::Notice { text } => text.to_string(),
+            Progress::Stage { name: text }
+            | Progress::Warning { text }
+            | Progress::Notice { text } => text.to_string(),
             Progress::Estimate { .. } => return None,
         })
     }
@@ -200,8 +208,8 @@ impl Progress<'_> {
     }
 }
 
-/// What a person watching a long computation is shown: every warning, and at most one other
-/// line per interval (the first after one interval has passed).
+/// What a person watching a long computation is shown: every warning and every stage as it
+/// begins, and at most one other line per interval (the first after one interval has passed).
 pub struct ProgressThrottle {
     interval: std::time::Duration,
     last: std::sync::Mutex<std::time::Instant>,
@@ -237,7 +245,8 @@ impl ProgressThrottle {
         }
         // Progress comes from many threads: a contended lock means a line is being shown.
         let mut last = self.last.try_lock().ok()?;
-        if last.elapsed() < self.interval {
+        let begins = matches!(progress, Progress::Stage { .. });
+        if last.elapsed() < self.interval && !begins {
             return None;
         }
         *last = std::time::Instant::now();
@@ -254,7 +263,7 @@ mod progress_tests {
     use std::time::Duration;
 
     #[test]
-    fn a_throttle_lets_warnings_through_always_and_status_once_per_interval() {
+    fn a_throttle_lets_warnings_and_stages_through_always_and_status_once_per_interval() {
         let status = Progress::Solve {
             iteration: 3,
             residual: 0.5,
@@ -267,6 +276,14 @@ mod progress_tests {
         );
         assert!(matches!(slow.admit(warning), Some(ProgressLine::Warning(t)) if t == "no light"));
         assert!(slow.admit(Progress::Estimate { radiosity: &[] }).is_none());
+        let stage = Progress::Stage {
+            name: "cluster tree",
+        };
+        assert!(
+            matches!(slow.admit(stage), Some(ProgressLine::Status(t)) if t == "cluster tree"),
+            "a stage is shown as it begins"
+        );
+        assert!(slow.admit(status).is_none(), "the interval starts again");
         let eager = ProgressThrottle::new(Duration::ZERO);
         assert!(matches!(
             eager.admit(status),

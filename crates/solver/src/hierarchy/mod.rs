@@ -400,8 +400,13 @@ impl Hierarchy {
         solver: &SolverSettings,
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<BuiltHierarchy, NeedsEntries> {
+        let name = format!("cluster tree over {} faces", scene.faces.len());
+        progress(Progress::Stage { name: &name });
         let mut unrefined = Hierarchy::cluster_tree(scene);
         unrefined.tree.collect_leaves();
+        progress(Progress::Stage {
+            name: "where light reaches: buried points and closed views",
+        });
         unrefined.reach.measure(&unrefined.tree, occluders);
         // A face light reaches nowhere (a beam's end cut off inside a wall) gathers nothing:
         // its view is closed, to no share, without the closure's rays, each of which would

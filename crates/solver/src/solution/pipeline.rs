@@ -56,6 +56,11 @@ pub fn solve_file(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Solved, SolveError> {
     let start = Instant::now();
+    let name = format!(
+        "loading {}: faces cut at contacts and sections",
+        path.display()
+    );
+    progress(Progress::Stage { name: &name });
     let scene = crate::input::load_scene(path)?;
     let load = start.elapsed().as_secs_f64();
     let mut solved = solve_scene(scene, request, progress)?;
