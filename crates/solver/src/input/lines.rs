@@ -13,9 +13,9 @@ pub(super) const RELATIVE_TOLERANCE: f64 = 1e-6;
 /// Most grid cells along the scene's longest side, per square root of its face count: bounds
 /// the grid whatever the face sizes, and grows with the faces as a surface does (a model's
 /// faces spread over its extent's area). Measured loading (docs/BENCHMARKS.md): at a fixed
-/// 1,024 a side the 1M-triangle village's cells held hundreds of edges each and its cuts took
-/// 24 s; with 2,048 / 4,096 a side 16 / 15 s, while the 126k-face monastery loaded in 1.8 s at
-/// 1,024 and 2.1 / 2.9 s at 2,048 / 4,096 (its large faces' boxes cover more empty cells).
+/// 1,024 a side the 1M-triangle village's cells held hundreds of edges each and it loaded in
+/// 25-27 s; with 2,048 / 4,096 a side 16 / 15 s, while the 126k-face monastery loaded in 1.8 s
+/// at 1,024 and 2.1 / 2.9 s at 2,048 / 4,096 (its large faces' boxes cover more empty cells).
 const CELLS_PER_ROOT_FACE: f64 = 3.0;
 
 /// A face's plane as the cuts read it: its corners, normal, and the distance below which an
