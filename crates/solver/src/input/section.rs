@@ -140,6 +140,22 @@ mod tests {
     use crate::scene::{Face, Scene};
     use glam::{DVec3, dvec3};
 
+    /// A 10 x 10 floor facing up, centred on the origin.
+    fn add_floor(scene: &mut Scene) {
+        let (x, z) = (DVec3::X, DVec3::Z);
+        let corner = dvec3(-5.0, 0.0, -5.0);
+        add_parallelogram(scene, "floor", (corner, z * 10.0, x * 10.0), GREY);
+    }
+
+    /// `count` 0.1 x 0.1 tiles facing up, `per_row` along x, `spacing` apart from `first`.
+    fn add_tiles(scene: &mut Scene, first: DVec3, (count, per_row): (usize, usize), spacing: f64) {
+        let (x, z) = (DVec3::X, DVec3::Z);
+        for i in 0..count {
+            let o = first + (x * (i % per_row) as f64 + z * (i / per_row) as f64) * spacing;
+            add_parallelogram(scene, "tile", (o, z * 0.1, x * 0.1), GREY);
+        }
+    }
+
     /// The areas of the pieces of object `object`, smallest first.
     fn areas(faces: &[Face], object: u32) -> Vec<f64> {
         let mut areas: Vec<f64> = (faces.iter())
@@ -164,10 +180,7 @@ mod tests {
             (dvec3(-1.0, 1.0, -1.0), z * 2.0, x * 6.0),
             GREY,
         );
-        for i in 0..3 {
-            let o = dvec3(50.0 + i as f64, 0.0, 50.0);
-            add_parallelogram(&mut scene, "tile", (o, z * 0.1, x * 0.1), GREY);
-        }
+        add_tiles(&mut scene, dvec3(50.0, 0.0, 50.0), (3, 3), 1.0);
         let (faces, cut) = split_faces_at_contacts(scene.faces.clone());
         assert_eq!(cut, 2, "the wall and the shelf");
         assert_eq!(areas(&faces, 0), [4.0, 12.0], "below and above the shelf");
@@ -192,12 +205,7 @@ mod tests {
         // runs across each side, whose area (0.4 m^2, the median) is too small to cut.
         let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
         let mut scene = Scene::default();
-        add_parallelogram(
-            &mut scene,
-            "floor",
-            (dvec3(-5.0, 0.0, -5.0), z * 10.0, x * 10.0),
-            GREY,
-        );
+        add_floor(&mut scene);
         let (corner, side) = (dvec3(-0.1, -1.0, -0.1), 0.2);
         for (o, u) in [
             (corner, x * side),
@@ -216,22 +224,9 @@ mod tests {
         // A 10 x 10 floor under 1,000 tiles lying 1 cm above it: 4,000 edges near the floor,
         // none through it. Collected in place from the near edges, every face's list kept
         // their buffer (4.5 GB over the village's million faces).
-        let (x, z) = (DVec3::X, DVec3::Z);
         let mut scene = Scene::default();
-        add_parallelogram(
-            &mut scene,
-            "floor",
-            (dvec3(-5.0, 0.0, -5.0), z * 10.0, x * 10.0),
-            GREY,
-        );
-        for i in 0..1000 {
-            let o = dvec3(
-                -5.0 + (i % 40) as f64 * 0.25,
-                0.01,
-                -5.0 + (i / 40) as f64 * 0.25,
-            );
-            add_parallelogram(&mut scene, "tile", (o, z * 0.1, x * 0.1), GREY);
-        }
+        add_floor(&mut scene);
+        add_tiles(&mut scene, dvec3(-5.0, 0.01, -5.0), (1000, 40), 0.25);
         let near: Vec<(u32, u8)> = (1..=1000)
             .flat_map(|f| (0..4).map(move |k| (f, k)))
             .collect();
