@@ -257,7 +257,9 @@ impl Hierarchy {
         self.stats
     }
 
-    /// Rebuilds the leaf list, the reached areas and the link operator after refinement.
+    /// Rebuilds the leaf list, the reached areas and the link operator: how the tests index
+    /// the hierarchies they build by hand ([`Hierarchy::build`] has measured its leaves first).
+    #[cfg(test)]
     fn index(&mut self, occluders: &Occluders) {
         self.tree.collect_leaves();
         self.reach.measure(&self.tree, occluders);
@@ -419,7 +421,8 @@ impl Hierarchy {
                         .is_some()
             })
             .collect();
-        unrefined.index(occluders);
+        // The leaves are collected and measured above: only the link operator is left.
+        unrefined.index_links_and_slopes();
         let run = Rounds::new(scene, occluders, settings, rays, solver, progress);
         run.refine(unrefined, settings.error, settings.budget(), None)
     }
