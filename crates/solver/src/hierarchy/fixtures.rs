@@ -1,6 +1,6 @@
 //! Scenes and a build helper for the hierarchy's unit tests.
 
-use super::{Hierarchy, HierarchySettings};
+use super::{BuiltHierarchy, Hierarchy, HierarchySettings};
 use crate::geometry::{Polygon, point_to_polygon_form_factor};
 use crate::pair::FormFactorSettings;
 use crate::reference::Probe;
@@ -58,6 +58,11 @@ pub(crate) fn screened_lamp(height: f64, edge: f64) -> Scene {
 
 /// The hierarchy of `scene` built at error knob `error`, other settings at their defaults.
 pub(crate) fn build(scene: &Scene, error: f64) -> Hierarchy {
+    build_and_solve(scene, error).hierarchy
+}
+
+/// [`build`], with the solution its refinement ended on.
+pub(crate) fn build_and_solve(scene: &Scene, error: f64) -> BuiltHierarchy {
     let occluders = Occluders::new(scene);
     let settings = HierarchySettings {
         error,
@@ -72,7 +77,6 @@ pub(crate) fn build(scene: &Scene, error: f64) -> Hierarchy {
         &crate::no_progress,
     )
     .expect("gmres needs no entries")
-    .hierarchy
 }
 
 /// A 4 x 4 room (faces inwards) lit by its ceiling, with a closed box of five faces standing

@@ -158,6 +158,14 @@ impl Reach {
             .collect()
     }
 
+    /// Whether light reaches no part of node `n`, as last measured (a node made since is not
+    /// known to be buried).
+    pub(super) fn reaches_nothing_of(&self, n: u32) -> bool {
+        self.seen_area
+            .get(n as usize)
+            .is_some_and(|&area| area == 0.0)
+    }
+
     /// Mean over the reached area of the leaves of the largest channel of reflected radiosity
     /// (`B - E`): the scale errors are measured against, which a small bright lamp does not
     /// inflate.
@@ -180,13 +188,17 @@ impl Reach {
 #[cfg(test)]
 mod tests {
     use super::Reach;
-    use crate::hierarchy::fixtures::{build, floor_and_a_box, floor_cut_by_a_box, room_with_a_box};
+    use crate::hierarchy::fixtures::{
+        add_parallelogram, build, build_and_solve, floor_and_a_box, floor_cut_by_a_box,
+        room_with_a_box,
+    };
     use crate::hierarchy::refine::{can_split_to, finest_radius};
     use crate::hierarchy::tree::Tree;
     use crate::hierarchy::{Hierarchy, HierarchySettings, receiving_area};
     use crate::mesh::corner_reading_point;
+    use crate::scene::{Material, Rgb};
     use crate::visibility::Occluders;
-    use glam::dvec3;
+    use glam::{DVec3, dvec3};
 
     #[test]
     fn a_box_on_the_floor_buries_its_footprint_and_nothing_else() {
@@ -210,6 +222,39 @@ mod tests {
                 "face {face}: {}",
                 hierarchy.reach.seen_area[node]
             );
+        }
+    }
+
+    #[test]
+    fn no_link_gathers_onto_or_sends_from_what_light_reaches_nowhere() {
+        // Light reaches no part of the floor's leaves under the box, though a small lamp
+        // inside the box faces them: no link ends there (one would gather light no one sees,
+        // or send light from inside the box), and solved, they hold their emission alone.
+        let mut scene = room_with_a_box();
+        let lamp = Material {
+            reflectance: Rgb::ZERO,
+            emission: Rgb::ONE,
+        };
+        let plate = (dvec3(1.45, 0.9, 1.45), DVec3::X * 0.1, DVec3::Z * 0.1);
+        add_parallelogram(&mut scene, "lamp inside", plate, lamp);
+        let built = build_and_solve(&scene, 0.1);
+        let (hierarchy, radiosity) = (&built.hierarchy, &built.radiosity);
+        let reach = &hierarchy.reach;
+        for link in &hierarchy.links {
+            assert!(!reach.reaches_nothing_of(link.receiver), "{link:?}");
+            assert!(!reach.reaches_nothing_of(link.source), "{link:?}");
+        }
+        let buried: Vec<usize> = (0..hierarchy.tree.leaves.len())
+            .filter(|&i| reach.seen_share[hierarchy.tree.leaves[i] as usize] == 0.0)
+            .collect();
+        assert!(!buried.is_empty());
+        for &i in &buried {
+            assert_eq!(
+                hierarchy.tree.leaf_patch(i).face,
+                0,
+                "only the floor is buried"
+            );
+            assert_eq!(radiosity[i], hierarchy.tree.leaf_patch(i).emission);
         }
     }
 

@@ -281,6 +281,12 @@ impl Decider<'_> {
                 Decision::Drop
             };
         }
+        // Light reaches no part of one end (a face inside a solid it runs into, the floor under
+        // a box): a link would gather light where no one sees it, or send light from there.
+        let reach = &self.factors.hierarchy.reach;
+        if reach.reaches_nothing_of(receiver) || reach.reaches_nothing_of(source) {
+            return Decision::Drop;
+        }
         // Clusters gather nothing themselves: one that received would hand the same irradiance
         // to every face below it, including faces that cannot see the source (light leaked
         // through a wall whose two sides share a cluster). Links end at elements, and clusters
