@@ -351,11 +351,9 @@ impl Hierarchy {
 
     /// Rebuilds the link operator (and the stats) on the leaves as listed and measured.
     fn index_links_and_slopes(&mut self) {
-        // A link decided before its end was measured buried carries light no one sees.
+        // A link decided before one of its ends was measured buried.
         let reach = &self.reach;
-        (self.links).retain(|l| {
-            !reach.reaches_nothing_of(l.receiver) && !reach.reaches_nothing_of(l.source)
-        });
+        (self.links).retain(|l| reach.reaches_both(l.receiver, l.source));
         self.fit_slopes();
         self.index_links();
         self.stats.elements = self.tree.leaves.len();

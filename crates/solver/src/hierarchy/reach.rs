@@ -166,6 +166,13 @@ impl Reach {
             .is_some_and(|&area| area == 0.0)
     }
 
+    /// Whether light reaches some part of both ends of a link from `source` to `receiver`:
+    /// one with an end light reaches nowhere would gather light where no one sees it, or send
+    /// light from inside a solid.
+    pub(super) fn reaches_both(&self, receiver: u32, source: u32) -> bool {
+        !self.reaches_nothing_of(receiver) && !self.reaches_nothing_of(source)
+    }
+
     /// Mean over the reached area of the leaves of the largest channel of reflected radiosity
     /// (`B - E`): the scale errors are measured against, which a small bright lamp does not
     /// inflate.
@@ -245,7 +252,7 @@ mod tests {
             assert!(!reach.reaches_nothing_of(link.source), "{link:?}");
         }
         let buried: Vec<usize> = (0..hierarchy.tree.leaves.len())
-            .filter(|&i| reach.seen_share[hierarchy.tree.leaves[i] as usize] == 0.0)
+            .filter(|&i| reach.reaches_nothing_of(hierarchy.tree.leaves[i]))
             .collect();
         assert!(!buried.is_empty());
         for &i in &buried {

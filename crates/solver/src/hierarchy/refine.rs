@@ -281,10 +281,8 @@ impl Decider<'_> {
                 Decision::Drop
             };
         }
-        // Light reaches no part of one end (a face inside a solid it runs into, the floor under
-        // a box): a link would gather light where no one sees it, or send light from there.
-        let reach = &self.factors.hierarchy.reach;
-        if reach.reaches_nothing_of(receiver) || reach.reaches_nothing_of(source) {
+        // An end light reaches nowhere: a face inside a solid it runs into, the floor under a box.
+        if !self.factors.hierarchy.reach.reaches_both(receiver, source) {
             return Decision::Drop;
         }
         // Clusters gather nothing themselves: one that received would hand the same irradiance
