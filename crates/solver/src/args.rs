@@ -35,7 +35,9 @@ pub struct CheckArgs {
     pub check: Check,
     /// Refine until the self-check's upper bound on the smooth RMS error is at most this
     /// (0.05 for 5%): a hierarchy from a coarse knob (0.8), halved each step down to --error,
-    /// refined from where it is, until a step adds under 1% more leaves; a dense mesh solved
+    /// refined from where it is, until a step adds under 1% more leaves (the first step makes
+    /// at most 8 n log2 n links for n faces, within --max-links, and goes on under
+    /// --max-links where that stopped it short of the target); a dense mesh solved
     /// again at twice --patches each step. Says where it stopped and why (`target` in the
     /// JSON). The default, 0.05, holds while the check is on and no --patches, --patch-size
     /// or --error fixes the resolution; `off` solves once at the resolution asked.

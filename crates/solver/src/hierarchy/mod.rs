@@ -450,6 +450,14 @@ impl Hierarchy {
         run.refine(self, knob, settings.budget(), Some(radiosity))
     }
 
+    /// Lets refinement go on past the link budget it stopped at, `max_links` now: the links
+    /// kept there, each on a coarse factor, are decided again in the next round.
+    pub fn raise_link_budget(&mut self, max_links: usize) {
+        if self.links.len() < max_links {
+            self.stats.link_budget_reached = false;
+        }
+    }
+
     /// Whether a finer knob could change anything: neither budget has stopped refinement.
     pub fn can_refine_further(&self) -> bool {
         !(self.stats.leaf_budget_reached || self.stats.link_budget_reached)

@@ -98,6 +98,9 @@ pub struct TargetStep {
     /// a budget made it so; absent for dense steps).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub knob: Option<f64>,
+    /// The link budget the hierarchy refined under (absent for dense steps).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_links: Option<usize>,
     /// Patches (leaves) solved for.
     pub patches: usize,
     /// Seconds since the start when this step's check ended.

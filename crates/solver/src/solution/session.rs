@@ -247,6 +247,31 @@ impl Session {
         hierarchy && self.edited.is_empty()
     }
 
+    /// The link budget a hierarchical session refines under; `None` for a dense one.
+    pub fn link_budget(&self) -> Option<usize> {
+        match &self.factors {
+            Factors::Hierarchy(_) => Some(self.request.hierarchy.unwrap_or_default().max_links),
+            _ => None,
+        }
+    }
+
+    /// Whether refinement stopped at the link budget (a hierarchy only).
+    pub fn stopped_at_link_budget(&self) -> bool {
+        matches!(&self.factors, Factors::Hierarchy(h) if h.stats().link_budget_reached)
+    }
+
+    /// Raises a hierarchical session's link budget to `max_links`: the next
+    /// [`Session::refine_further`] goes on past where the lower one stopped it.
+    pub fn raise_link_budget(&mut self, max_links: usize) {
+        if let Factors::Hierarchy(h) = &mut self.factors {
+            h.raise_link_budget(max_links);
+            self.request.hierarchy = Some(HierarchySettings {
+                max_links,
+                ..self.request.hierarchy.unwrap_or_default()
+            });
+        }
+    }
+
     /// This hierarchical session refined further at the finer error `knob`, from its current
     /// solution ([`Hierarchy::refine_further`]: nothing is thrown away), with whether anything
     /// changed (see [`Session::can_refine_further`]). The next [`Session::solve`] solves on
