@@ -167,18 +167,19 @@ impl Run<'_> {
                 self.report.stopped = why;
                 return Ok((session, report));
             }
-            let next = if again {
-                knob
-            } else {
-                (knob / 2.0).max(finest)
+            let (next, finer) = match again {
+                true => (
+                    knob,
+                    format!("refining on with up to {} links", settings.max_links),
+                ),
+                false => {
+                    let next = (knob / 2.0).max(finest);
+                    (next, format!("refining on at error {next}"))
+                }
             };
             if raise {
                 session.raise_link_budget(settings.max_links);
             }
-            let finer = match again {
-                true => format!("refining on with up to {} links", settings.max_links),
-                false => format!("refining on at error {next}"),
-            };
             self.say_finer(&report, &finer);
             let (refined, changed) = session.refine_further(next, self.progress)?;
             session = refined;
