@@ -6,8 +6,8 @@ mod common;
 use common::*;
 use glam::{DVec3, dvec3};
 use solver::{
-    HierarchySettings, Method, Scene, Seed, SolveError, SolveRequest, Solved, SolverSettings,
-    solve_scene,
+    HierarchySettings, Method, Rgb, Scene, Seed, Session, SolveError, SolveRequest, Solved,
+    SolverSettings, solve_scene,
 };
 use std::path::Path;
 
@@ -30,35 +30,54 @@ fn solve(scene: Scene, error: f64) -> Solved {
     solve_scene(scene, &hierarchical(error), &solver::no_progress).expect("solves")
 }
 
+/// The solved session of `scene` at `error`: its own patch system ([`Session::radiosity`])
+/// and what it shows ([`Session::patch_values`], [`Session::vertex_radiosity`]).
+fn solve_session(scene: &Scene, error: f64) -> Session {
+    let mut session =
+        Session::hierarchical(scene, &hierarchical(error), &solver::no_progress).expect("builds");
+    session.solve(&solver::no_progress);
+    session
+}
+
+/// The worst relative error of `values` against `expected`.
+fn worst_off(values: &[Rgb], expected: f64) -> f64 {
+    (values.iter())
+        .map(|b| (b.x / expected - 1.0).abs())
+        .fold(0.0, f64::max)
+}
+
 #[test]
 fn furnaces_stay_exact_with_and_without_an_occluder() {
+    // The leaves' own system is exact (closed views sum to one); what is shown, the vertices'
+    // gathers and the patches' means of them, sees visibility through sampled rays.
     for rho in [0.5, 0.9, 0.99] {
-        let solved = solve(closed_cube(1.0, grey(rho, 1.0)), 0.1);
+        let session = solve_session(&closed_cube(1.0, grey(rho, 1.0)), 0.1);
         let expected = 1.0 / (1.0 - rho);
-        let worst = solved
-            .radiosity
-            .iter()
-            .map(|b| (b.x / expected - 1.0).abs())
-            .fold(0.0, f64::max);
-        println!(
-            "hierarchical furnace, rho {rho}: {} leaves, worst relative error {worst:.2e}",
-            solved.radiosity.len()
+        let (system, shown) = (
+            worst_off(session.radiosity(), expected),
+            worst_off(&session.patch_values(), expected),
         );
-        assert!(worst < 1e-3, "rho {rho}: {worst}");
+        println!(
+            "hierarchical furnace, rho {rho}: {} leaves, worst relative error {system:.2e}, shown {shown:.2e}",
+            session.radiosity().len()
+        );
+        assert!(
+            system < 1e-3 && shown < 1e-3,
+            "rho {rho}: {system}, shown {shown}"
+        );
     }
     let (rho, emission) = (0.8, 1.0);
-    let scene = occluded_furnace(grey(rho, emission));
-    let solved = solve(scene, 0.1);
-    let worst = solved
-        .radiosity
-        .iter()
-        .map(|b| (b.x * (1.0 - rho) / emission - 1.0).abs())
-        .fold(0.0, f64::max);
-    println!(
-        "hierarchical occluded furnace: {} leaves, worst relative error {worst:.2e}",
-        solved.radiosity.len()
+    let session = solve_session(&occluded_furnace(grey(rho, emission)), 0.1);
+    let expected = emission / (1.0 - rho);
+    let (system, shown) = (
+        worst_off(session.radiosity(), expected),
+        worst_off(&session.patch_values(), expected),
     );
-    assert!(worst < 1e-3, "{worst}");
+    println!(
+        "hierarchical occluded furnace: {} leaves, worst relative error {system:.2e}, shown {shown:.2e}",
+        session.radiosity().len()
+    );
+    assert!(system < 1e-3 && shown < 0.01, "{system}, shown {shown}");
 }
 
 #[test]
@@ -404,4 +423,24 @@ fn another_gather_seed_draws_another_pattern_the_report_names_it_and_the_light_h
     println!("floor's smooth mean: seed 0 {a:.5}, seed 9 {b:.5}");
     assert_ne!(first.vertex_radiosity, other.vertex_radiosity);
     assert!((b / a - 1.0).abs() < 0.01, "seed 0 {a}, seed 9 {b}");
+}
+
+#[test]
+fn a_hierarchys_patch_values_are_the_means_of_what_viewers_are_shown_over_them() {
+    let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
+    let solved = solve(scene.clone(), 0.3);
+    assert_eq!(
+        solved.radiosity,
+        solved.mesh.patch_means(&solved.vertex_radiosity)
+    );
+    // A dense mesh's patches hold their own system's solution, exact to the mesh.
+    let request = SolveRequest {
+        hierarchy: None,
+        ..hierarchical(0.3)
+    };
+    let dense = solve_scene(scene.clone(), &request, &solver::no_progress).expect("solves");
+    let mesh = solver::starting_mesh(&scene, &request).expect("meshes");
+    let mut session = Session::new(&scene, &mesh, &request, &solver::no_progress).expect("builds");
+    session.solve(&solver::no_progress);
+    assert_eq!(dense.radiosity, session.radiosity());
 }

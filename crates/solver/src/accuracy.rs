@@ -1,7 +1,8 @@
 //! Error of a solution at probe points, against a reference or an exact answer.
 //!
-//! Two readings of a solution are measured: **flat** (the value of the patch holding the probe)
-//! and **smooth** (what viewers show: the corner values they are sent, interpolated over the
+//! Two readings of a solution are measured: **flat** (the value of the patch holding the probe,
+//! as the answer gives it: `Session::patch_values`, for a hierarchy the mean of what viewers
+//! are shown over the patch) and **smooth** (what viewers show: the corner values they are sent, interpolated over the
 //! patch's fan triangles, as `wire::display` does).
 //! Only probes on non-emitting faces count: an emitter's own emission is exact and would
 //! swamp the comparison. Probes inside solids (a beam's end through a wall, a floor under a

@@ -3,9 +3,10 @@
 //! Quads become `nu x nv` grids whose cells are as square as the quad allows; triangles become
 //! `k^2` triangles similar to the original, so no patch is thinner than the face it came from.
 
-use crate::geometry::Polygon;
+use crate::geometry::{Polygon, triangle_area};
 use crate::scene::{Rgb, Scene};
 use glam::{DAffine3, DVec3};
+use rayon::prelude::*;
 
 /// How finely to mesh.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -166,6 +167,42 @@ impl Mesh {
         sums.into_iter()
             .map(|(sum, area)| if area > 0.0 { sum / area } else { Rgb::ZERO })
             .collect()
+    }
+
+    /// Per patch, the mean over it of `values` (one per corner) interpolated linearly over its
+    /// fan triangles, as viewers show them.
+    pub fn patch_means(&self, values: &[Rgb]) -> Vec<Rgb> {
+        (self.patches.par_iter())
+            .map(|patch| self.interpolated_mean(&patch.corners[..patch.corner_count()], values))
+            .collect()
+    }
+
+    /// The mean over a patch (corners `ids`) of `values` (one per corner) interpolated linearly
+    /// over its fan triangles, as viewers show them.
+    pub(crate) fn interpolated_mean(&self, ids: &[u32], values: &[Rgb]) -> Rgb {
+        (ids.iter().zip(self.interpolation_weights(ids)))
+            .map(|(&c, weight)| values[c as usize] * weight)
+            .sum()
+    }
+
+    /// Per corner of a patch (corners `ids`), its weight in the mean of values interpolated
+    /// linearly over the patch's fan triangles: a third of the area share of each fan triangle
+    /// it is a corner of (all zero for a patch of no area).
+    pub(crate) fn interpolation_weights(&self, ids: &[u32]) -> [f64; 4] {
+        let at = |k: usize| self.positions[ids[k] as usize];
+        let mut weights = [0.0; 4];
+        let mut total = 0.0;
+        for k in 1..ids.len() - 1 {
+            let area = triangle_area(at(0), at(k), at(k + 1));
+            for corner in [0, k, k + 1] {
+                weights[corner] += area / 3.0;
+            }
+            total += area;
+        }
+        if total > 0.0 {
+            weights.iter_mut().for_each(|w| *w /= total);
+        }
+        weights
     }
 
     /// Moves every patch of `object` (and the corners they use) rigidly by `motion`.
