@@ -81,6 +81,41 @@ fn furnaces_stay_exact_with_and_without_an_occluder() {
 }
 
 #[test]
+fn a_furnace_stopped_at_a_tiny_link_budget_shows_its_exact_light_from_the_corners_gathers() {
+    // Refinement stops at 100 links and leaves the pairs past them undecided: the leaves'
+    // own system lacks their light, and what is shown holds E / (1 - rho) all the same.
+    let (rho, emission) = (0.8, 1.0);
+    let scene = occluded_furnace(grey(rho, emission));
+    let request = SolveRequest {
+        hierarchy: Some(HierarchySettings {
+            error: 0.1,
+            max_links: 100,
+            ..HierarchySettings::default()
+        }),
+        ..hierarchical(0.1)
+    };
+    let mut session =
+        Session::hierarchical(&scene, &request, &solver::no_progress).expect("builds");
+    let report = session.solve(&solver::no_progress);
+    let stats = report.hierarchy.expect("a hierarchy");
+    assert!(
+        stats.link_budget_reached && stats.deferred_pairs > 0,
+        "{stats:?}"
+    );
+    assert!(stats.links <= 100, "{stats:?}");
+    let expected = emission / (1.0 - rho);
+    let system = worst_off(session.radiosity(), expected);
+    let shown = worst_off(&session.patch_values(), expected);
+    let vertices = worst_off(&session.vertex_radiosity(), expected);
+    println!(
+        "occluded furnace at 100 links: {} pairs left undecided, system off by {system:.2e}, patches shown {shown:.2e}, vertices {vertices:.2e}",
+        stats.deferred_pairs
+    );
+    assert!(system > 0.1, "the system lacks the pairs' light: {system}");
+    assert!(shown < 0.01 && vertices < 0.03, "{shown}, {vertices}");
+}
+
+#[test]
 fn scaling_the_scene_changes_neither_leaves_nor_radiosity() {
     let scene = solver::load_obj("scenes/cornell-box.obj".as_ref()).expect("shipped scene loads");
     let base = solve(scene.clone(), 0.2);

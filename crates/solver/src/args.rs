@@ -284,9 +284,16 @@ pub fn budget_warnings(asked: &HierarchySettings, stats: &HierarchyStats) -> Vec
         ));
     }
     if stats.link_budget_reached {
+        let left = match stats.deferred_pairs {
+            0 => "some carry more error than that".to_string(),
+            pairs => format!(
+                "the {pairs} pairs still to decide were left to the corners' own gathers \
+                 (the patches' own system lacks their light)"
+            ),
+        };
         warnings.push(format!(
             "links stopped splitting at {} links, where splitting the pairs still to decide would have passed \
-             --max-links {} even at --error {}; some carry more error than that",
+             --max-links {} even at --error {}; {left}",
             stats.links, asked.max_links, stats.knob_used
         ));
     }

@@ -1,6 +1,6 @@
 //! Scenes and a build helper for the hierarchy's unit tests.
 
-use super::{BuiltHierarchy, Hierarchy, HierarchySettings};
+use super::{BuiltHierarchy, Hierarchy, HierarchySettings, PastLinkBudget};
 use crate::geometry::{Polygon, point_to_polygon_form_factor};
 use crate::pair::FormFactorSettings;
 use crate::reference::Probe;
@@ -71,7 +71,7 @@ pub(crate) fn build_and_solve(scene: &Scene, error: f64) -> BuiltHierarchy {
     Hierarchy::build(
         scene,
         &occluders,
-        &settings,
+        (&settings, PastLinkBudget::Sampled),
         FormFactorSettings::default(),
         &SolverSettings::default(),
         &crate::no_progress,

@@ -121,6 +121,21 @@ pub const LEAVES_PER_FACE: usize = 2;
 /// for little RMS; 2 left contact lines and shadow edges too coarse.
 pub const MIN_RADIUS_PER_ERROR: f64 = 1.0;
 
+/// What refinement does with the pairs still to decide once splitting them would pass the
+/// link budget ([`HierarchySettings::max_links`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PastLinkBudget {
+    /// Each is kept as it is, on a coarsely sampled factor, or dropped: the leaves' own system
+    /// carries their light, for a display that reads it.
+    Sampled,
+    /// Each is left undecided: for a display whose corners gather every bounce themselves,
+    /// which reads the leaves' system only as where their last bounces' solve starts. Deciding
+    /// them was the monastery's last generation of refinement (11.6M pairs, 1.3M kept): 6 of
+    /// its 41 s, for the same shown error to 0.001 points (docs/BENCHMARKS.md). A later step
+    /// under a larger budget decides them first.
+    Deferred,
+}
+
 /// A kept link: `receiver` gathers `factor * B(source)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Link {
@@ -187,6 +202,8 @@ pub struct HierarchyStats {
     /// Whether links stopped splitting at [`HierarchySettings::max_links`] even at the coarsest
     /// knob tried.
     pub link_budget_reached: bool,
+    /// Pairs left undecided there ([`PastLinkBudget::Deferred`]).
+    pub deferred_pairs: usize,
 }
 
 /// The element and cluster trees of a scene, their links, and the link operator on the leaves.
@@ -206,6 +223,10 @@ pub struct Hierarchy {
     /// Per element node, its linear radiosity model's weights ([`Hierarchy::slopes_of`]).
     slopes: Vec<Slope>,
     stats: HierarchyStats,
+    /// What refinement does past the link budget.
+    past_link_budget: PastLinkBudget,
+    /// The pairs it left undecided there ([`PastLinkBudget::Deferred`]).
+    deferred: Vec<Pair>,
 }
 
 impl Hierarchy {
@@ -226,6 +247,8 @@ impl Hierarchy {
                 clusters,
                 ..HierarchyStats::default()
             },
+            past_link_budget: PastLinkBudget::Sampled,
+            deferred: Vec::new(),
         }
     }
 
@@ -395,12 +418,14 @@ impl Hierarchy {
     }
 
     /// Builds the hierarchy of `scene`: refines on an estimate, then, up to
-    /// `settings.max_rounds` times, solves and refines the links the solution shows too coarse.
-    /// Returns it with the last solution carried to its leaves, to start the final solve from.
+    /// `settings.max_rounds` times, solves and refines the links the solution shows too coarse,
+    /// treating pairs past the link budget as `past_link_budget` says (this build and every
+    /// later refinement of it). Returns it with the last solution carried to its leaves, to
+    /// start the final solve from.
     pub fn build(
         scene: &Scene,
         occluders: &Occluders,
-        settings: &HierarchySettings,
+        (settings, past_link_budget): (&HierarchySettings, PastLinkBudget),
         rays: FormFactorSettings,
         solver: &SolverSettings,
         progress: &(dyn Fn(Progress) + Sync),
@@ -408,6 +433,7 @@ impl Hierarchy {
         let name = format!("cluster tree over {} faces", scene.faces.len());
         progress(Progress::Stage { name: &name });
         let mut unrefined = Hierarchy::cluster_tree(scene);
+        unrefined.past_link_budget = past_link_budget;
         unrefined.tree.collect_leaves();
         progress(Progress::Stage {
             name: "where light reaches: buried points and closed views",
@@ -451,7 +477,8 @@ impl Hierarchy {
     }
 
     /// Lets refinement go on past the link budget it stopped at, `max_links` now: the links
-    /// kept there, each on a coarse factor, are decided again in the next round.
+    /// kept there, each on a coarse factor, are decided again in the next round, and the pairs
+    /// left undecided there decided.
     pub fn raise_link_budget(&mut self, max_links: usize) {
         if self.links.len() < max_links {
             self.stats.link_budget_reached = false;
@@ -572,6 +599,8 @@ impl<'a> Rounds<'a> {
             };
             if on_links {
                 pending = hierarchy.take_links_to_redo(&sources, &target);
+                pending.append(&mut hierarchy.deferred);
+                hierarchy.stats.deferred_pairs = 0;
                 if pending.is_empty() {
                     break;
                 }
@@ -667,10 +696,18 @@ mod tests {
                 lines.lock().unwrap().push(line);
             }
         };
-        let stats = Hierarchy::build(scene, &occluders, &settings, rays, &solver, &progress)
-            .expect("gmres needs no entries")
-            .hierarchy
-            .stats();
+        let past_link_budget = PastLinkBudget::Sampled;
+        let stats = Hierarchy::build(
+            scene,
+            &occluders,
+            (&settings, past_link_budget),
+            rays,
+            &solver,
+            &progress,
+        )
+        .expect("gmres needs no entries")
+        .hierarchy
+        .stats();
         (stats, lines.into_inner().unwrap())
     }
 

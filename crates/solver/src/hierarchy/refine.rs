@@ -8,7 +8,7 @@ use super::factor::{
 };
 use super::shaft::Visibility;
 use super::tree::{MAX_DEPTH, Node};
-use super::{Hierarchy, Link, Pair};
+use super::{Hierarchy, Link, Pair, PastLinkBudget};
 use crate::pair::FormFactorSettings;
 use crate::sampling::pair_seed;
 use crate::scene::Rgb;
@@ -380,6 +380,12 @@ impl Hierarchy {
             // Links now plus pairs still to decide: what the links would be with no more splits.
             if self.links.len() + pending.len() > run.budget.max_links {
                 self.stats.link_budget_reached = true;
+                if self.past_link_budget == PastLinkBudget::Deferred {
+                    self.stats.deferred_pairs = pending.len();
+                    pending.shrink_to_fit();
+                    self.deferred = pending;
+                    return;
+                }
             }
             let mut earlier = Vec::new();
             let decisions = loop {

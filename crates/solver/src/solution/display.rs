@@ -160,7 +160,7 @@ mod tests {
     use super::{Displayed, split_where_direct_light_curves};
     use crate::accuracy::evaluate;
     use crate::hierarchy::fixtures::{GREY, add_parallelogram, probes_under_a_lamp};
-    use crate::hierarchy::{Hierarchy, HierarchySettings};
+    use crate::hierarchy::{Hierarchy, HierarchySettings, PastLinkBudget};
     use crate::mesh::Mesh;
     use crate::pair::FormFactorSettings;
     use crate::sampling::Seed;
@@ -208,10 +208,17 @@ mod tests {
             },
             SolverSettings::default(),
         );
-        let rays = FormFactorSettings::default();
+        let (rays, past) = (FormFactorSettings::default(), PastLinkBudget::Sampled);
         let no_progress = &crate::no_progress;
-        let built = Hierarchy::build(scene, &occluders, &settings, rays, &solver, no_progress)
-            .expect("gmres needs no entries");
+        let built = Hierarchy::build(
+            scene,
+            &occluders,
+            (&settings, past),
+            rays,
+            &solver,
+            no_progress,
+        )
+        .expect("gmres needs no entries");
         let mut hierarchy = built.hierarchy;
         let emission = hierarchy.leaf_emission();
         let radiosity = (hierarchy.solve(&emission, Some(&built.radiosity), &solver, no_progress))

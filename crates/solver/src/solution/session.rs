@@ -4,10 +4,14 @@
 use super::display::{Displayed, split_where_direct_light_curves};
 use super::report::{ObjectRadiosity, SolveReport, StageSeconds};
 use super::request::{SolveError, SolveRequest, check_dense_size};
-use super::vertices::{CornerIndirect, CornerLight, clamp_below_zero, reached_corners};
+use super::vertices::{
+    CornerIndirect, CornerLight, clamp_below_zero, gathers_direct_light, reached_corners,
+};
 use crate::check::{CheckSettings, Estimate};
 use crate::form_factors::{DenseFormFactors, UpdateStats};
-use crate::hierarchy::{BuiltHierarchy, Hierarchy, HierarchySettings, HierarchyStats};
+use crate::hierarchy::{
+    BuiltHierarchy, Hierarchy, HierarchySettings, HierarchyStats, PastLinkBudget,
+};
 use crate::mesh::Mesh;
 use crate::scene::motion::{Motion, reach_after};
 use crate::scene::{MAX_COORDINATE, Rgb, Scene, check_emission};
@@ -217,13 +221,18 @@ impl Session {
         let occluders = Occluders::new(scene);
         seconds.mesh = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
+        // Corners that gather every bounce read the leaves' system only as their solve's start.
+        let past_link_budget = match gathers_direct_light(scene, &lit_objects(scene)) {
+            true => PastLinkBudget::Deferred,
+            false => PastLinkBudget::Sampled,
+        };
         let BuiltHierarchy {
             hierarchy,
             radiosity,
         } = Hierarchy::build(
             scene,
             &occluders,
-            &settings,
+            (&settings, past_link_budget),
             request.form_factors,
             &request.solver,
             progress,
@@ -284,10 +293,12 @@ impl Session {
         if !self.can_refine_further() {
             return Ok((self, false));
         }
+        // Refined on the answer's patch values: a hierarchy's own system lacks the light of
+        // the pairs it left undecided at the link budget, and carries its links' errors.
+        let radiosity = self.patch_values();
         let Session {
             scene,
             factors,
-            radiosity,
             request,
             mut seconds,
             ..

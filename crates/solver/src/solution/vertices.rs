@@ -24,7 +24,7 @@ use crate::Progress;
 use crate::geometry::{Polygon, point_to_polygon_form_factor};
 use crate::mesh::{Mesh, Patch, corner_reading_point};
 use crate::sampling::{Seed, SphericalPolygon, roberts_point, stratified_uv};
-use crate::scene::{Rgb, Scene};
+use crate::scene::{Face, Rgb, Scene};
 use crate::solve::{SolverSettings, System, solve_unclamped};
 use crate::transport::Transport;
 use crate::visibility::Occluders;
@@ -96,6 +96,18 @@ const MIN_EXTRAPOLATED_WEIGHT: f64 = 0.5 - 1e-9;
 /// Emitting faces beyond which corners gather none (their patches' values are averaged, as
 /// without a gather): corners times emitters times rays would outgrow the solve itself.
 pub const MAX_GATHERED_EMITTERS: usize = 256;
+
+/// Whether corners gather the direct light of `scene`'s emitting faces and of the faces of
+/// `lights` themselves: at most [`MAX_GATHERED_EMITTERS`] of them.
+pub fn gathers_direct_light(scene: &Scene, lights: &BTreeSet<u32>) -> bool {
+    let emitters = scene.faces.iter().filter(|f| gathers_from(f, lights));
+    emitters.count() <= MAX_GATHERED_EMITTERS
+}
+
+/// Whether corners gather from `face`: it emits, or its object is one of `lights`.
+fn gathers_from(face: &Face, lights: &BTreeSet<u32>) -> bool {
+    face.emission.max_element() > 0.0 || lights.contains(&face.object)
+}
 /// One emitting input face.
 struct Emitter {
     polygon: Polygon,
@@ -235,11 +247,8 @@ impl CornerLight {
         earlier: Option<EarlierDirect>,
         progress: &(dyn Fn(Progress) + Sync),
     ) {
-        let emitters: Vec<Emitter> = scene
-            .faces
-            .iter()
-            .enumerate()
-            .filter(|(_, f)| f.emission.max_element() > 0.0 || lights.contains(&f.object))
+        let emitters: Vec<Emitter> = (scene.faces.iter().enumerate())
+            .filter(|(_, f)| gathers_from(f, lights))
             .map(|(i, f)| Emitter {
                 polygon: f.polygon,
                 normal: f.polygon.normal(),
