@@ -5,7 +5,8 @@ use super::display::{Displayed, split_where_direct_light_curves};
 use super::report::{ObjectRadiosity, SolveReport, StageSeconds};
 use super::request::{SolveError, SolveRequest, check_dense_size};
 use super::vertices::{
-    CornerIndirect, CornerLight, clamp_below_zero, gathers_direct_light, reached_corners,
+    CornerIndirect, CornerLight, MAX_GATHERED_EMITTERS, clamp_below_zero, gathers_direct_light,
+    reached_corners,
 };
 use crate::check::{CheckSettings, Estimate};
 use crate::form_factors::{DenseFormFactors, UpdateStats};
@@ -129,6 +130,19 @@ pub enum EditError {
     /// [`crate::scene::MAX_COORDINATE`].
     #[error("{0}")]
     InvalidMove(String),
+    /// A light that would stop the corners gathering ([`MAX_GATHERED_EMITTERS`] emitting
+    /// faces at most) on a hierarchy whose pairs past its link budget were left to them.
+    #[error(
+        "lighting '{object}' would bring the emitting faces past the {MAX_GATHERED_EMITTERS} \
+         the vertices gather, and this hierarchy left {pairs} pairs at its link budget to \
+         their gathers: solve the scene with that light on, or with a larger --max-links"
+    )]
+    PastGatheredEmitters {
+        /// The object the edit would light.
+        object: String,
+        /// The pairs the hierarchy left undecided.
+        pairs: usize,
+    },
 }
 
 /// What moving an object cost.
@@ -656,6 +670,14 @@ impl Session {
     pub fn set_emission(&mut self, name: &str, emission: Rgb) -> Result<(), EditError> {
         let object = self.object_index(name)?;
         check_emission(emission.to_array()).map_err(EditError::InvalidEmission)?;
+        let pairs = self.hierarchy_stats().map_or(0, |h| h.deferred_pairs);
+        if emission.max_element() > 0.0 && pairs > 0 {
+            let lights: BTreeSet<u32> = self.lights.iter().copied().chain([object]).collect();
+            if !gathers_direct_light(&self.edited_scene(), &lights) {
+                let object = name.to_string();
+                return Err(EditError::PastGatheredEmitters { object, pairs });
+            }
+        }
         self.edited.insert(object, emission);
         if emission.max_element() > 0.0 {
             self.keep_lights(BTreeSet::from([object]));
@@ -867,12 +889,9 @@ impl Session {
             vec![0.0; self.objects.len()],
             vec![Rgb::ZERO; self.objects.len()],
         );
-        for ((o, a), b) in self
-            .patch_objects
-            .iter()
-            .zip(&self.area)
-            .zip(&self.radiosity)
-        {
+        // As the answer gives them: a hierarchy's own system may lack light it left undecided.
+        let values = self.patch_values();
+        for ((o, a), b) in self.patch_objects.iter().zip(&self.area).zip(&values) {
             area[*o as usize] += a;
             power[*o as usize] += *b * *a;
         }
@@ -948,6 +967,58 @@ mod tests {
     use super::*;
     use crate::mesh::PatchTarget;
     use crate::scene::Material;
+
+    #[test]
+    fn lighting_past_the_gathered_emitters_a_hierarchy_left_pairs_to_is_refused_by_name() {
+        // A lamp over 300 tiles: lit, the tiles would be 301 emitting faces, past the 256 the
+        // vertices gather, and the pairs the hierarchy left at its link budget would go dark.
+        let mut scene = Scene::default();
+        let grey = Material {
+            reflectance: Rgb::splat(0.5),
+            emission: Rgb::ZERO,
+        };
+        let tiles = scene.add_object("tiles");
+        for (i, j) in (0..20).flat_map(|i| (0..15).map(move |j| (i, j))) {
+            let o = DVec3::new(i as f64 * 0.1, 0.0, j as f64 * 0.1);
+            let (x, z) = (DVec3::X * 0.1, DVec3::Z * 0.1);
+            scene.add_polygon(tiles, &[o, o + z, o + z + x, o + x], grey);
+        }
+        let lamp = scene.add_object("lamp");
+        let (o, x, z) = (DVec3::new(0.5, 1.0, 0.5), DVec3::X, DVec3::Z * 0.5);
+        let lit = Material {
+            emission: Rgb::ONE,
+            ..grey
+        };
+        scene.add_polygon(lamp, &[o, o + x, o + x + z, o + z], lit);
+        let request = |max_links| SolveRequest {
+            hierarchy: Some(HierarchySettings {
+                error: 0.3,
+                max_links,
+                ..HierarchySettings::default()
+            }),
+            ..SolveRequest::default()
+        };
+        let mut left = Session::hierarchical(&scene, &request(10), &no_progress).unwrap();
+        let pairs = left.hierarchy_stats().unwrap().deferred_pairs;
+        assert!(pairs > 0);
+        let refused = left.set_emission("tiles", Rgb::ONE).unwrap_err();
+        assert_eq!(
+            refused,
+            EditError::PastGatheredEmitters {
+                object: "tiles".into(),
+                pairs
+            }
+        );
+        assert!(
+            refused
+                .to_string()
+                .starts_with("lighting 'tiles' would bring")
+        );
+        assert!(left.set_emission("lamp", Rgb::splat(2.0)).is_ok());
+        let mut whole = Session::hierarchical(&scene, &request(10_000_000), &no_progress).unwrap();
+        assert_eq!(whole.hierarchy_stats().unwrap().deferred_pairs, 0);
+        assert!(whole.set_emission("tiles", Rgb::ONE).is_ok());
+    }
 
     /// A closed unit cube whose floor and ceiling are separate lamps.
     fn two_lamp_box() -> Scene {
