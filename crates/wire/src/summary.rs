@@ -125,6 +125,10 @@ pub struct HierarchyCounts {
     /// Whether refinement stopped at the link budget (absent from servers before it existed).
     #[serde(default)]
     pub link_budget_reached: bool,
+    /// The pairs it left undecided there, to the vertices' own gathers (absent from servers
+    /// before it existed).
+    #[serde(default)]
+    pub deferred_pairs: usize,
 }
 
 /// A solution's error estimated against probes path-traced for it, the tracing's noise taken

@@ -174,6 +174,7 @@ pub fn report_for_viewers(report: &solver::SolveReport) -> SolveReport {
             knob_used: h.knob_used,
             leaf_budget_reached: h.leaf_budget_reached,
             link_budget_reached: h.link_budget_reached,
+            deferred_pairs: h.deferred_pairs,
         }),
         estimate: report.estimate.as_ref().map(estimate_for_viewers),
         target: report.target.as_ref().map(|t| TargetOutcome {
