@@ -46,17 +46,22 @@ fn worst_off(values: &[Rgb], expected: f64) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// The worst relative errors against `expected` of `session`'s own patch system and of the
+/// patch values it shows.
+fn system_and_shown_off(session: &Session, expected: f64) -> (f64, f64) {
+    (
+        worst_off(session.radiosity(), expected),
+        worst_off(&session.patch_values(), expected),
+    )
+}
+
 #[test]
 fn furnaces_stay_exact_with_and_without_an_occluder() {
     // The leaves' own system is exact (closed views sum to one); what is shown, the vertices'
     // gathers and the patches' means of them, sees visibility through sampled rays.
     for rho in [0.5, 0.9, 0.99] {
         let session = solve_session(&closed_cube(1.0, grey(rho, 1.0)), 0.1);
-        let expected = 1.0 / (1.0 - rho);
-        let (system, shown) = (
-            worst_off(session.radiosity(), expected),
-            worst_off(&session.patch_values(), expected),
-        );
+        let (system, shown) = system_and_shown_off(&session, 1.0 / (1.0 - rho));
         println!(
             "hierarchical furnace, rho {rho}: {} leaves, worst relative error {system:.2e}, shown {shown:.2e}",
             session.radiosity().len()
@@ -68,11 +73,7 @@ fn furnaces_stay_exact_with_and_without_an_occluder() {
     }
     let (rho, emission) = (0.8, 1.0);
     let session = solve_session(&occluded_furnace(grey(rho, emission)), 0.1);
-    let expected = emission / (1.0 - rho);
-    let (system, shown) = (
-        worst_off(session.radiosity(), expected),
-        worst_off(&session.patch_values(), expected),
-    );
+    let (system, shown) = system_and_shown_off(&session, emission / (1.0 - rho));
     println!(
         "hierarchical occluded furnace: {} leaves, worst relative error {system:.2e}, shown {shown:.2e}",
         session.radiosity().len()
@@ -104,8 +105,7 @@ fn a_furnace_stopped_at_a_tiny_link_budget_shows_its_exact_light_from_the_corner
     );
     assert!(stats.links <= 100, "{stats:?}");
     let expected = emission / (1.0 - rho);
-    let system = worst_off(session.radiosity(), expected);
-    let shown = worst_off(&session.patch_values(), expected);
+    let (system, shown) = system_and_shown_off(&session, expected);
     let vertices = worst_off(&session.vertex_radiosity(), expected);
     println!(
         "occluded furnace at 100 links: {} pairs left undecided, system off by {system:.2e}, patches shown {shown:.2e}, vertices {vertices:.2e}",

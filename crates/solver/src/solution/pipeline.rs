@@ -38,7 +38,7 @@ impl Solved {
     /// What `session` solved, as `report` says, kept.
     pub(crate) fn kept(scene: Scene, session: Session, report: SolveReport) -> Solved {
         let vertex_radiosity = session.vertex_radiosity();
-        let (mesh, radiosity) = session.into_solution();
+        let (mesh, radiosity) = session.into_solution(&vertex_radiosity);
         Solved {
             scene,
             mesh,

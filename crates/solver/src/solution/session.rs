@@ -424,9 +424,10 @@ impl Session {
         self.seconds.mesh += seconds;
     }
 
-    /// The patches and their values ([`Session::patch_values`]), the session given up.
-    pub(crate) fn into_solution(self) -> (Mesh, Vec<Rgb>) {
-        let values = self.patch_values();
+    /// The patches and their values ([`Session::patch_values`]) with the corners' values
+    /// `shown` ([`Session::vertex_radiosity`]), the session given up.
+    pub(crate) fn into_solution(self, shown: &[Rgb]) -> (Mesh, Vec<Rgb>) {
+        let values = self.patch_values_with(shown);
         (self.mesh, values)
     }
 
@@ -673,7 +674,8 @@ impl Session {
         let pairs = self.hierarchy_stats().map_or(0, |h| h.deferred_pairs);
         if emission.max_element() > 0.0 && pairs > 0 {
             let lights: BTreeSet<u32> = self.lights.iter().copied().chain([object]).collect();
-            if !gathers_direct_light(&self.edited_scene(), &lights) {
+            // Lights keep their place when turned off: the scene's own emitters and `lights`.
+            if !gathers_direct_light(&self.scene, &lights) {
                 let object = name.to_string();
                 return Err(EditError::PastGatheredEmitters { object, pairs });
             }
