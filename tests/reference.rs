@@ -42,6 +42,15 @@ fn point_to_corner_rectangle(a: f64, b: f64, height: f64) -> f64 {
         / (2.0 * PI)
 }
 
+/// The exact form factor from point `(x, y)` of an `a x b` plate to the parallel one `height`
+/// above it: the emitter split at the point's projection into four corner rectangles.
+fn point_to_plate(x: f64, y: f64, (a, b): (f64, f64), height: f64) -> f64 {
+    [(x, y), (a - x, y), (x, b - y), (a - x, b - y)]
+        .iter()
+        .map(|&(u, v)| point_to_corner_rectangle(u, v, height))
+        .sum()
+}
+
 #[test]
 fn the_tracer_matches_the_analytic_point_form_factor() {
     // A black emitter over a grey plate: B(x) = rho * F(x -> emitter) * E exactly at every point.
@@ -49,16 +58,41 @@ fn the_tracer_matches_the_analytic_point_form_factor() {
     let scene = parallel_plates(1.0, 1.0, 1.0, grey(rho, 0.0), grey(0.0, emission));
     for probe in trace(&scene, 40, 4000, 5).iter().filter(|p| p.face == 0) {
         let [x, y, _] = probe.position;
-        // Split the emitter at the point's projection into four corner rectangles.
-        let f: f64 = [(x, y), (1.0 - x, y), (x, 1.0 - y), (1.0 - x, 1.0 - y)]
-            .iter()
-            .map(|&(a, b)| point_to_corner_rectangle(a, b, 1.0))
-            .sum();
-        let expected = rho * f * emission;
+        let expected = rho * point_to_plate(x, y, (1.0, 1.0), 1.0) * emission;
         assert!(
             (probe.radiosity[0] - expected).abs() <= 5.0 * probe.standard_error[0] + 1e-9,
             "at ({x}, {y}): {} vs {expected}",
             probe.radiosity[0]
+        );
+    }
+}
+
+#[test]
+fn under_a_sky_the_tracer_draws_by_solid_angle_and_its_noise_stays_low() {
+    // A 40 m square sky 1 m over a ground of its size: drawn by area, a point's 1,000 paths
+    // would weigh emitter points by a cos^2 / r^2 running from 1 overhead to 1e-6 at the far
+    // edge (relative noise about sqrt(A / pi F) / sqrt(n): 70%); by solid angle, by a cosine
+    // alone (about 2%). Exact: rho F E.
+    let (rho, emission, side) = (0.5, 4.0, 40.0);
+    let scene = parallel_plates(side, side, 1.0, grey(rho, 0.0), grey(0.0, emission));
+    let probes: Vec<Probe> = trace(&scene, 40, 1000, 7);
+    let on_ground: Vec<&Probe> = probes.iter().filter(|p| p.face == 0).collect();
+    assert!(
+        on_ground.len() > 10,
+        "{} probes on the ground",
+        on_ground.len()
+    );
+    for probe in on_ground {
+        let [x, y, _] = probe.position;
+        let expected = rho * point_to_plate(x, y, (side, side), 1.0) * emission;
+        let (estimate, noise) = (probe.radiosity[0], probe.standard_error[0]);
+        assert!(
+            (estimate - expected).abs() <= 5.0 * noise + 1e-9,
+            "at ({x}, {y}): {estimate} vs {expected}"
+        );
+        assert!(
+            noise < 0.05 * expected,
+            "at ({x}, {y}): ±{noise} of {expected}"
         );
     }
 }

@@ -7,7 +7,7 @@
 //! (seed, probe index), so the result is the same for any thread count.
 
 use crate::Progress;
-use crate::sampling::{cosine_direction, unit_interval};
+use crate::sampling::{SphericalPolygon, cosine_direction, onto_plane, unit_interval};
 use crate::scene::{Rgb, Scene};
 use crate::visibility::Occluders;
 use glam::DVec3;
@@ -17,6 +17,15 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// The least solid angle, steradians, an emitter must cover above a point for next-event
+/// estimation to draw its point there by solid angle rather than by area. Drawn by area, a sky
+/// over a village of eight monasteries weighs its points by a `cos / r^2` that varies a
+/// hundredfold over it: the village's probes read 3.8% noise at 65,536 paths, the one
+/// monastery's 0.9%. Drawn by solid angle each weighs only its cosine at the point; below a
+/// steradian (a lamp seen from afar) the kernel hardly varies, and the spherical triangles'
+/// sampling loses precision as they shrink.
+const MIN_SOLID_ANGLE: f64 = 1.0;
 
 /// One probe and its estimate.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -100,7 +109,9 @@ struct Tracer<'a> {
 }
 
 impl Tracer<'_> {
-    /// Irradiance at `x` on face `face` straight from one emitter point (next-event estimation).
+    /// Irradiance at `x` on face `face` straight from one emitter point (next-event estimation),
+    /// over pi. The point is drawn uniformly over the solid angle the emitter covers above `x`'s
+    /// horizon where that is at least [`MIN_SOLID_ANGLE`], else over its area.
     fn direct(&self, x: DVec3, normal: DVec3, face: u32, rng: &mut Pcg64Mcg) -> Rgb {
         if self.emitters.is_empty() {
             return Rgb::ZERO;
@@ -115,17 +126,37 @@ impl Tracer<'_> {
                 self.emitter_cumulative[k - 1]
             })
             / total;
-        let y = emitter
-            .polygon
-            .uniform_point(uniform(rng), uniform(rng), uniform(rng));
-        let to_light = y - x;
-        let distance_sq = to_light.length_squared();
-        let direction = to_light / distance_sq.sqrt();
-        let (cos_x, cos_y) = (
-            normal.dot(direction),
-            -emitter.polygon.normal().dot(direction),
-        );
-        if self.emitters[k] == face || cos_x <= 0.0 || cos_y <= 0.0 {
+        let (corners, emitter_normal) = (emitter.polygon.corners(), emitter.polygon.normal());
+        let view = SphericalPolygon::seen_above(x, normal, corners)
+            .filter(|view| view.solid_angle() >= MIN_SOLID_ANGLE);
+        // The point and its cosine-weighted measure over the pdf it was drawn with: the
+        // solid angle `cos_x * Omega`, or the area's `cos_x cos_y / r^2 * A`.
+        let (y, factor) = match view {
+            Some(view) => {
+                let w = view.direction(uniform(rng), uniform(rng));
+                let y = onto_plane(x, w, corners[0], emitter_normal);
+                let facing = -emitter_normal.dot(w) > 0.0;
+                (
+                    y,
+                    if facing {
+                        normal.dot(w) * view.solid_angle()
+                    } else {
+                        0.0
+                    },
+                )
+            }
+            None => {
+                let y = emitter
+                    .polygon
+                    .uniform_point(uniform(rng), uniform(rng), uniform(rng));
+                let to_light = y - x;
+                let distance_sq = to_light.length_squared();
+                let direction = to_light / distance_sq.sqrt();
+                let cosines = normal.dot(direction) * (-emitter_normal.dot(direction)).max(0.0);
+                (y, cosines / distance_sq * emitter.polygon.area())
+            }
+        };
+        if self.emitters[k] == face || !(factor > 0.0 && y.is_finite()) {
             return Rgb::ZERO;
         }
         if !self
@@ -134,8 +165,8 @@ impl Tracer<'_> {
         {
             return Rgb::ZERO;
         }
-        // Radiance of a Lambertian emitter is E / pi; the area pdf is p_k / A_k.
-        emitter.emission / PI * (cos_x * cos_y / distance_sq) * emitter.polygon.area() / probability
+        // Radiance of a Lambertian emitter is E / pi; the emitter was picked with p_k.
+        emitter.emission / PI * factor / probability
     }
 
     /// One path's estimate of the radiosity leaving `x`.

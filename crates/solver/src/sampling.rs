@@ -78,6 +78,13 @@ pub fn cosine_direction(normal: DVec3, u: f64, v: f64) -> DVec3 {
     .normalize()
 }
 
+/// Where the ray from `origin` along `direction` meets the plane through `on_plane` with
+/// normal `normal` (not finite where the ray runs along the plane): the emitter point of a
+/// direction drawn by solid angle.
+pub fn onto_plane(origin: DVec3, direction: DVec3, on_plane: DVec3, normal: DVec3) -> DVec3 {
+    origin + direction * ((on_plane - origin).dot(normal) / direction.dot(normal))
+}
+
 /// A polygon as seen from a point, set up to draw directions uniformly over the solid angle it
 /// covers: each fan triangle by Arvo's stratified method (Arvo 1995, "Stratified Sampling of
 /// Spherical Triangles", in the robust form of pbrt 4e, 6.5.4), picked by its share of the

@@ -23,7 +23,7 @@ use super::gather_point::{GatherPoint, GatheredAt, PointWeights, Tally};
 use crate::Progress;
 use crate::geometry::{Polygon, point_to_polygon_form_factor};
 use crate::mesh::{Mesh, Patch, corner_reading_point};
-use crate::sampling::{Seed, SphericalPolygon, roberts_point, stratified_uv};
+use crate::sampling::{Seed, SphericalPolygon, onto_plane, roberts_point, stratified_uv};
 use crate::scene::{Face, Rgb, Scene};
 use crate::solve::{SolverSettings, System, solve_unclamped};
 use crate::transport::Transport;
@@ -840,10 +840,9 @@ impl EmitterPoints {
                 // here, and left out it biased a sliver's integral by 0.3%.
                 let (u, v) = roberts_point(k, seed);
                 let w = views[inside].direction(u, v);
-                let on_plane = emitter.polygon.corners()[0] - origin;
-                let distance = on_plane.dot(emitter.normal) / w.dot(emitter.normal);
+                let target = onto_plane(origin, w, emitter.polygon.corners()[0], emitter.normal);
                 let weight = corner.normal.dot(w).max(0.0) * views[inside].solid_angle();
-                (origin + w * distance, weight)
+                (target, weight)
             }
             // cos cos / r^2, the point-to-point kernel.
             EmitterPoints::ByArea => {
