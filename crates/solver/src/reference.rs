@@ -20,11 +20,12 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// The least solid angle, steradians, an emitter must cover above a point for next-event
 /// estimation to draw its point there by solid angle rather than by area. Drawn by area, a sky
-/// over a village of eight monasteries weighs its points by a `cos / r^2` that varies a
-/// hundredfold over it: the village's probes read 3.8% noise at 65,536 paths, the one
-/// monastery's 0.9%. Drawn by solid angle each weighs only its cosine at the point; below a
-/// steradian (a lamp seen from afar) the kernel hardly varies, and the spherical triangles'
-/// sampling loses precision as they shrink.
+/// over a village of eight monasteries weighs its points by a `cos cos / r^2` that varies
+/// over orders of magnitude across it: the village's probes read 4.0% noise at 65,536 paths
+/// (0.24% drawn by solid angle), the one monastery's 1.04% (0.23%; docs/BENCHMARKS.md, "A sky
+/// drawn by solid angle in the reference"). Drawn by solid angle each weighs only its cosine
+/// at the point; below a steradian (a lamp seen from afar) the kernel hardly varies, and the
+/// spherical triangles' sampling loses precision as they shrink.
 const MIN_SOLID_ANGLE: f64 = 1.0;
 
 /// One probe and its estimate.
