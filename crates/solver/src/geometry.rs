@@ -94,6 +94,14 @@ impl Polygon {
             .fold(0.0, f64::max)
     }
 
+    /// An upper bound on the solid angle, steradians, the polygon covers from `x`: each of its
+    /// points' `cos / r^2` is at most one over the nearest one's squared distance (infinite on
+    /// the polygon). Far cheaper than the solid angle itself, it settles that a lamp seen from
+    /// afar covers little.
+    pub fn solid_angle_bound(&self, x: DVec3) -> f64 {
+        self.area() / self.closest_point(x).distance_squared(x)
+    }
+
     /// The point of the (planar, convex) polygon nearest to `x`.
     pub fn closest_point(&self, x: DVec3) -> DVec3 {
         let (c, n) = (self.corners(), self.normal());

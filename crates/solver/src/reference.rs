@@ -128,7 +128,9 @@ impl Tracer<'_> {
             })
             / total;
         let (corners, emitter_normal) = (emitter.polygon.corners(), emitter.polygon.normal());
-        let view = SphericalPolygon::seen_above(x, normal, corners)
+        let view = (emitter.polygon.solid_angle_bound(x) >= MIN_SOLID_ANGLE)
+            .then(|| SphericalPolygon::seen_above(x, normal, corners))
+            .flatten()
             .filter(|view| view.solid_angle() >= MIN_SOLID_ANGLE);
         // The point and its cosine-weighted measure over the pdf it was drawn with: the
         // solid angle `cos_x * Omega`, or the area's `cos_x cos_y / r^2 * A`.

@@ -382,6 +382,25 @@ mod tests {
     }
 
     #[test]
+    fn a_polygons_solid_angle_bound_holds_everywhere_and_is_tight_from_afar() {
+        for (polygon, point, _) in polygons_and_points() {
+            let bound = polygon.solid_angle_bound(point);
+            let view = SphericalPolygon::seen_from(point, polygon.corners()).expect("seen");
+            assert!(view.solid_angle() <= bound, "{bound} from {point}");
+        }
+        // Straight over a square's centre at a distance d it covers `A / d^2 (1 - O(A / d^2))`,
+        // on either side of its plane.
+        let square = polygons_and_points()[0].0;
+        let centre = square.centroid() + square.normal() * 100.0;
+        for point in [centre, centre - square.normal() * 200.0] {
+            let view = SphericalPolygon::seen_from(point, square.corners()).expect("seen");
+            let bound = square.solid_angle_bound(point);
+            assert!(bound >= view.solid_angle() && bound < view.solid_angle() * 1.001);
+        }
+        assert_eq!(square.solid_angle_bound(square.centroid()), f64::INFINITY);
+    }
+
+    #[test]
     fn a_cube_face_covers_a_sixth_of_the_sphere_from_the_cube_centre() {
         let face = [
             dvec3(-1.0, -1.0, 1.0),

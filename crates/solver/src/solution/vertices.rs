@@ -800,7 +800,9 @@ impl EmitterPoints {
         };
         (corner.insides.iter())
             .map(|&origin| {
-                SphericalPolygon::seen_above(origin, corner.normal, corners)
+                (emitter.polygon.solid_angle_bound(origin) >= MIN_SOLID_ANGLE)
+                    .then(|| SphericalPolygon::seen_above(origin, corner.normal, corners))
+                    .flatten()
                     .filter(|above| above.solid_angle() >= MIN_SOLID_ANGLE || covers_enough(origin))
             })
             .collect::<Option<Vec<_>>>()
