@@ -302,14 +302,14 @@ impl Hierarchy {
         finest_radius: f64,
         max_leaves: usize,
     ) {
+        self.tree.collect_leaves();
+        self.reach.measure(&self.tree, occluders);
+        // Each round splits every straddling leaf it may, so only the pieces it made can
+        // straddle in the next: they alone are measured and looked at, and the leaves are
+        // listed and their reached areas summed once, at the end.
+        let (mut candidates, mut leaf_count) = (self.tree.leaves.clone(), self.tree.leaves.len());
         loop {
-            self.tree.collect_leaves();
-            self.reach.measure(&self.tree, occluders);
-            let straddling: Vec<u32> = self
-                .tree
-                .leaves
-                .iter()
-                .copied()
+            let straddling: Vec<u32> = (candidates.into_iter())
                 .filter(|&n| {
                     self.reach.straddles[n as usize]
                         && refine::can_split_to(&self.tree.nodes[n as usize], finest_radius)
@@ -318,14 +318,20 @@ impl Hierarchy {
             let added: usize = (straddling.iter())
                 .map(|&n| self.tree.children_if_split(n) - 1)
                 .sum();
-            let leaves = self.tree.leaves.len() + added;
-            if straddling.is_empty() || leaves > max_leaves {
+            if straddling.is_empty() || leaf_count + added > max_leaves {
                 break;
             }
+            let first_piece = self.tree.nodes.len() as u32;
             for n in straddling {
                 self.tree.subdivide(n);
             }
+            leaf_count += added;
+            candidates = (first_piece..self.tree.nodes.len() as u32).collect();
+            self.reach
+                .measure_leaves(&self.tree, &candidates, occluders);
         }
+        self.tree.collect_leaves();
+        self.reach.sum_reached_area(&self.tree);
         self.index_links_and_slopes();
     }
 

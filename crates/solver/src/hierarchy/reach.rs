@@ -62,16 +62,21 @@ fn a_face_crosses(patch: &Patch, insets: &[DVec3], radius: f64, occluders: &Occl
 impl Reach {
     /// Measures the leaves of `tree` not measured yet and sums the reached area up the trees.
     pub(super) fn measure(&mut self, tree: &Tree, occluders: &Occluders) {
-        self.seen_share.resize(tree.nodes.len(), f64::NAN);
-        let unmeasured: Vec<u32> = tree
-            .leaves
-            .iter()
-            .copied()
-            .filter(|&n| self.seen_share[n as usize].is_nan())
+        let unmeasured: Vec<u32> = (tree.leaves.iter().copied())
+            .filter(|&n| self.seen_share.get(n as usize).is_none_or(|s| s.is_nan()))
             .collect();
+        self.measure_leaves(tree, &unmeasured, occluders);
+        self.sum_reached_area(tree);
+    }
+
+    /// Measures the leaves `leaves` of `tree`: their reached share, whether they straddle the
+    /// edge of the reach, and which corners are buried. The reached areas are summed up the
+    /// trees apart ([`Reach::sum_reached_area`]), once a run of splits is over.
+    pub(super) fn measure_leaves(&mut self, tree: &Tree, leaves: &[u32], occluders: &Occluders) {
+        self.seen_share.resize(tree.nodes.len(), f64::NAN);
         self.straddles.resize(tree.nodes.len(), false);
         self.buried_corners.resize(tree.nodes.len(), [false; 4]);
-        let measured: Vec<(f64, bool, [bool; 4])> = unmeasured
+        let measured: Vec<(f64, bool, [bool; 4])> = leaves
             .par_iter()
             .map(|&n| {
                 let patch = tree.element_patch(n);
@@ -108,11 +113,16 @@ impl Reach {
                 (share, straddles, buried_corners)
             })
             .collect();
-        for (n, (share, straddles, corners)) in unmeasured.into_iter().zip(measured) {
+        for (&n, (share, straddles, corners)) in leaves.iter().zip(measured) {
             self.seen_share[n as usize] = share;
             self.straddles[n as usize] = straddles;
             self.buried_corners[n as usize] = corners;
         }
+    }
+
+    /// Sums the leaves' reached areas up the trees of `tree` (its leaves all measured) and
+    /// weighs what each node's parent gathers for it ([`Reach::push_weights`]).
+    pub(super) fn sum_reached_area(&mut self, tree: &Tree) {
         self.seen_area = vec![0.0; tree.nodes.len()];
         for &leaf in &tree.leaves {
             self.seen_area[leaf as usize] =

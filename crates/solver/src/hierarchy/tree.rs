@@ -366,11 +366,12 @@ impl Tree {
 
     /// The patch of node `n`, which must be an element (a leaf, a face or a piece of one).
     pub(super) fn element_patch(&self, n: u32) -> &Patch {
-        &self.nodes[n as usize]
-            .element
-            .as_ref()
-            .expect("an element, not a cluster")
-            .patch
+        &self.element(n).patch
+    }
+
+    /// The element of node `n`.
+    fn element(&self, n: u32) -> &Element {
+        (self.nodes[n as usize].element.as_ref()).expect("an element, not a cluster")
     }
 
     /// Whether node `n` is an element not split yet: splitting it adds
@@ -382,9 +383,7 @@ impl Tree {
 
     /// How many children element `n` splits into ([`SplitShape`]).
     pub(super) fn children_if_split(&self, n: u32) -> usize {
-        let element = self.nodes[n as usize].element.as_ref();
-        let element = element.expect("only elements are subdivided");
-        SplitShape::of(&element.patch.polygon).child_count()
+        SplitShape::of(&self.element_patch(n).polygon).child_count()
     }
 
     /// Splits element `n` into its children ([`SplitShape`]), once.
@@ -465,8 +464,9 @@ impl Tree {
     /// its quadtree's order.
     pub(super) fn collect_leaves(&mut self) {
         self.leaves.clear();
+        let mut stack = Vec::new();
         for &root in &self.face_node {
-            let mut stack = vec![root];
+            stack.push(root);
             while let Some(n) = stack.pop() {
                 let node = &self.nodes[n as usize];
                 if node.child_count == 0 {
@@ -491,30 +491,35 @@ impl Tree {
     /// lit side (a roof where a wall passes through), and a lit leaf's corner inside a post
     /// standing on it no longer took the dark of the leaf beside the post.
     pub fn leaf_mesh(&self, buried: impl Fn(u32, usize) -> bool) -> Mesh {
-        let mut mesh = Mesh::default();
-        let mut corner_ids: HashMap<(u32, [u32; 2], bool), u32> = HashMap::new();
-        for &leaf in &self.leaves {
-            let element = self.nodes[leaf as usize]
-                .element
-                .as_ref()
-                .expect("leaves are elements");
-            let face = element.patch.face;
-            let count = element.patch.polygon.corners().len();
-            let mut corners = [0u32; 4];
-            for (k, &at) in element.lattice[..count].iter().enumerate() {
-                let side = buried(leaf, k);
-                corners[k] = *corner_ids.entry((face, at, side)).or_insert_with(|| {
-                    mesh.positions.push(element.patch.polygon.corners()[k]);
-                    mesh.positions.len() as u32 - 1
+        // Corners are shared within a face alone, and the leaves are listed face by face
+        // ([`Tree::collect_leaves`]): each face's run of leaves looks its corners up in a map
+        // of its own, small enough to stay in cache.
+        let mut mesh = Mesh {
+            positions: Vec::new(),
+            patches: Vec::with_capacity(self.leaves.len()),
+        };
+        let face_of = |leaf: u32| self.element(leaf).patch.face;
+        for leaves in self.leaves.chunk_by(|&a, &b| face_of(a) == face_of(b)) {
+            let mut corner_ids: HashMap<([u32; 2], bool), u32> = HashMap::new();
+            for &leaf in leaves {
+                let element = self.element(leaf);
+                let count = element.patch.polygon.corners().len();
+                let mut corners = [0u32; 4];
+                for (k, &at) in element.lattice[..count].iter().enumerate() {
+                    let side = buried(leaf, k);
+                    corners[k] = *corner_ids.entry((at, side)).or_insert_with(|| {
+                        mesh.positions.push(element.patch.polygon.corners()[k]);
+                        mesh.positions.len() as u32 - 1
+                    });
+                }
+                if count == 3 {
+                    corners[3] = corners[2];
+                }
+                mesh.patches.push(Patch {
+                    corners,
+                    ..element.patch
                 });
             }
-            if count == 3 {
-                corners[3] = corners[2];
-            }
-            mesh.patches.push(Patch {
-                corners,
-                ..element.patch
-            });
         }
         mesh
     }
