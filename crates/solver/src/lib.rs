@@ -58,7 +58,7 @@ pub use solve::{Method, SolveOutcome, SolverSettings, System, solve};
 pub use transport::{Entries, Transport};
 
 /// Where a long computation is, for progress displays and progressive streaming.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug)]
 pub enum Progress<'a> {
     /// Form-factor rows done out of total (two passes over every row).
     FormFactors {
@@ -132,11 +132,35 @@ pub enum Progress<'a> {
         /// What, in one sentence.
         text: &'a str,
     },
-    /// The solver's current estimate, between iterations (at GMRES restarts).
+    /// The solver's current estimate, between iterations.
     Estimate {
         /// Radiosity per patch, W/m^2; not yet converged.
-        radiosity: &'a [Rgb],
+        radiosity: Unconverged<'a>,
     },
+}
+
+/// A solver's estimate between iterations, worked out only when read: GMRES's iterate costs a
+/// pass over its whole basis (up to 31 values a patch), which only a progressive display,
+/// a few times a second, wants.
+#[derive(Clone, Copy)]
+pub struct Unconverged<'a>(&'a (dyn Fn() -> Vec<Rgb> + Sync));
+
+impl<'a> Unconverged<'a> {
+    /// The estimate `read` works out.
+    pub fn new(read: &'a (dyn Fn() -> Vec<Rgb> + Sync)) -> Self {
+        Unconverged(read)
+    }
+
+    /// Radiosity per patch, W/m^2.
+    pub fn read(&self) -> Vec<Rgb> {
+        (self.0)()
+    }
+}
+
+impl std::fmt::Debug for Unconverged<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Unconverged(..)")
+    }
 }
 
 /// A budget of hierarchical refinement ([`HierarchySettings`]).
@@ -275,7 +299,11 @@ mod progress_tests {
             "not before an interval has passed"
         );
         assert!(matches!(slow.admit(warning), Some(ProgressLine::Warning(t)) if t == "no light"));
-        assert!(slow.admit(Progress::Estimate { radiosity: &[] }).is_none());
+        let none = Vec::new;
+        let estimate = Progress::Estimate {
+            radiosity: Unconverged::new(&none),
+        };
+        assert!(slow.admit(estimate).is_none());
         let stage = Progress::Stage {
             name: "cluster tree",
         };

@@ -5,9 +5,9 @@
 //! `sqrt(sum_i A_i |r_i|^2) / sqrt(sum_i A_i |E_i|^2)` falls to the tolerance. Its error bound is
 //! `|B - B*| <= |r| / (1 - max rho)`, which is why bright scenes need a small tolerance.
 
-use crate::Progress;
 use crate::scene::Rgb;
 use crate::transport::{Entries, Transport};
+use crate::{Progress, Unconverged};
 use rayon::prelude::*;
 use std::fmt;
 use std::str::FromStr;
@@ -270,7 +270,10 @@ impl Run<'_> {
             iteration,
             residual,
         });
-        (self.progress)(Progress::Estimate { radiosity });
+        let current = || radiosity.to_vec();
+        (self.progress)(Progress::Estimate {
+            radiosity: Unconverged::new(&current),
+        });
         residual <= self.settings.tolerance
             || iteration >= self.settings.max_iterations
             || !residual.is_finite()
@@ -417,15 +420,14 @@ impl Run<'_> {
                     residual: estimate / self.emission_norm,
                 });
                 let stop = estimate <= target || iteration >= self.settings.max_iterations;
-                if !stop {
-                    // The iterate so far, for progressive display: O(n k) beside the O(n^2) product.
-                    let current = self.iterate(radiosity, &hessenberg, &g, &basis, &scale);
-                    (self.progress)(Progress::Estimate {
-                        radiosity: &current,
-                    });
-                } else {
+                if stop {
                     break;
                 }
+                // The iterate so far, for progressive display, worked out if it is read.
+                let current = || self.iterate(radiosity, &hessenberg, &g, &basis, &scale);
+                (self.progress)(Progress::Estimate {
+                    radiosity: Unconverged::new(&current),
+                });
             }
             let next = self.iterate(radiosity, &hessenberg, &g, &basis, &scale);
             radiosity.copy_from_slice(&next);

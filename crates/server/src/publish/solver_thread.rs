@@ -185,7 +185,7 @@ fn first_solve(
         {
             *last = Instant::now();
             // Not final: the patches' means at the corners will do until the direct gather.
-            hub.publish(&to_f32(&mesh.corner_means(radiosity)), false);
+            hub.publish(&to_f32(&mesh.corner_means(&radiosity.read())), false);
         }
     };
     let report = session.solve(&progress);
