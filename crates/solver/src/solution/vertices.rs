@@ -323,7 +323,10 @@ impl CornerLight {
         (mut corners, centroids): (Vec<Option<GatherPoint>>, &[Option<GatherPoint>]),
         progress: &(dyn Fn(Progress) + Sync),
     ) {
-        for (point, unreached) in corners.iter_mut().zip(self.unreached_corners(mesh)) {
+        for (point, &unreached) in corners
+            .iter_mut()
+            .zip(&self.unreached_corners(mesh).corners)
+        {
             if unreached {
                 *point = None;
             }
@@ -446,16 +449,16 @@ impl CornerLight {
         self.gathered && self.indirect == CornerIndirect::Gathered && self.bounce.is_some()
     }
 
-    /// Per corner of `mesh`, whether light reaches it from none of the patches that use it
-    /// (inside a wall its face runs into: all its gathers read there is the wall's inside).
-    fn unreached_corners(&self, mesh: &Mesh) -> Vec<bool> {
+    /// The corners of `mesh` light reaches from none of the patches that use them (inside a
+    /// wall their face runs into: all their gathers read there is the wall's inside).
+    fn unreached_corners(&self, mesh: &Mesh) -> Unreached {
         let mut unreached = vec![true; mesh.positions.len()];
         for (patch, slots) in mesh.patches.iter().zip(&self.reached) {
             for (&c, &reached) in patch.corners[..patch.corner_count()].iter().zip(slots) {
                 unreached[c as usize] &= !reached;
             }
         }
-        unreached
+        Unreached::new(mesh, unreached)
     }
 
     /// Per patch of `mesh` under the patches' `emission`, how far the direct light its centroid
@@ -537,8 +540,8 @@ struct LastBounces<'a> {
     /// The mesh's [`patch_corners`], made once for every pass.
     patch_corners: Vec<[u32; 4]>,
     bounce: &'a BounceLandings,
-    /// Per corner, whether light reaches it from none of its patches ([`extrapolate_unreached`]).
-    unreached: &'a [bool],
+    /// The corners light reaches from none of their patches ([`extrapolate_unreached`]).
+    unreached: &'a Unreached,
     /// Per corner, its face's emission and reflectance; `None` for a corner no patch uses.
     surface: &'a [Option<(Rgb, Rgb)>],
 }
@@ -616,6 +619,27 @@ pub fn reached_corners(mesh: &Mesh, occluders: &Occluders, seed: Seed) -> Vec<[b
         .collect()
 }
 
+/// The corners of a mesh light reaches from none of their patches ([`extrapolate_unreached`]).
+struct Unreached {
+    /// Per corner, whether it is one.
+    corners: Vec<bool>,
+    /// The patches with one or more of them, in order: each pass of the last bounces reads
+    /// these alone (on the monastery, a tenth of the patches), not the whole mesh.
+    patches: Vec<u32>,
+}
+
+impl Unreached {
+    fn new(mesh: &Mesh, corners: Vec<bool>) -> Unreached {
+        let patches = (mesh.patches.iter().enumerate())
+            .filter(|(_, patch)| {
+                (patch.corners[..patch.corner_count()].iter()).any(|&c| corners[c as usize])
+            })
+            .map(|(i, _)| i as u32)
+            .collect();
+        Unreached { corners, patches }
+    }
+}
+
 /// Replaces the value `at_corners` of each `unreached` corner by the one the visible
 /// parts of its patches call for: in each patch, the one value its unreached corners share
 /// that makes the patch's interpolated mean the value `at_centres` its centroid has, where
@@ -628,40 +652,46 @@ pub fn reached_corners(mesh: &Mesh, occluders: &Occluders, seed: Seed) -> Vec<[b
 /// which rule a patch takes depends on its shape and on which corners are reached alone.
 fn extrapolate_unreached(
     mesh: &Mesh,
-    unreached: &[bool],
+    unreached: &Unreached,
     at_corners: &mut [Rgb],
     at_centres: &[Rgb],
 ) {
+    let is_unreached = |c: &u32| unreached.corners[*c as usize];
     let mut sums = vec![(Rgb::ZERO, 0.0); mesh.positions.len()];
-    for (i, patch) in mesh.patches.iter().enumerate() {
+    for &i in &unreached.patches {
+        let patch = &mesh.patches[i as usize];
         let ids = &patch.corners[..patch.corner_count()];
-        if ids.iter().all(|&c| !unreached[c as usize]) {
-            continue;
-        }
         let weights = mesh.interpolation_weights(ids);
         let (mut known, mut unknown_weight) = (Rgb::ZERO, 0.0);
-        for (&c, &weight) in ids.iter().zip(&weights) {
-            if unreached[c as usize] {
+        for (c, &weight) in ids.iter().zip(&weights) {
+            if is_unreached(c) {
                 unknown_weight += weight;
             } else {
-                known += at_corners[c as usize] * weight;
+                known += at_corners[*c as usize] * weight;
             }
         }
         // Corners that weigh little in the mean would take the others' error many times over.
         let shared = if unknown_weight >= MIN_EXTRAPOLATED_WEIGHT {
-            (at_centres[i] - known) / unknown_weight
+            (at_centres[i as usize] - known) / unknown_weight
         } else {
-            at_centres[i]
+            at_centres[i as usize]
         };
-        for &c in ids.iter().filter(|&&c| unreached[c as usize]) {
+        for &c in ids.iter().filter(|c| is_unreached(c)) {
             let sum = &mut sums[c as usize];
             sum.0 += shared * patch.area;
             sum.1 += patch.area;
         }
     }
-    for (value, (sum, area)) in at_corners.iter_mut().zip(sums) {
-        if area > 0.0 {
-            *value = sum / area;
+    for &i in &unreached.patches {
+        let patch = &mesh.patches[i as usize];
+        for &c in patch.corners[..patch.corner_count()]
+            .iter()
+            .filter(|c| is_unreached(c))
+        {
+            let (sum, area) = sums[c as usize];
+            if area > 0.0 {
+                at_corners[c as usize] = sum / area;
+            }
         }
     }
 }
@@ -869,7 +899,8 @@ pub fn clamp_below_zero(mut values: Vec<Rgb>) -> Vec<Rgb> {
 #[cfg(test)]
 mod tests {
     use super::{
-        CornerLight, Emitter, extrapolate_unreached, patch_corners, second_order_mean, seen_factors,
+        CornerLight, Emitter, Unreached, extrapolate_unreached, patch_corners, second_order_mean,
+        seen_factors,
     };
     use crate::accuracy::evaluate;
     use crate::geometry::point_to_polygon_form_factor;
@@ -1326,10 +1357,11 @@ mod tests {
         let mesh = Mesh::build(&scene, PatchTarget::EdgeLength(10.0));
         assert_eq!(mesh.patches.len(), 2, "one patch a face");
         let (triangle, square) = (&mesh.patches[0], &mesh.patches[1]);
-        let mut unreached = vec![false; mesh.positions.len()];
+        let mut flags = vec![false; mesh.positions.len()];
         for c in [triangle.corners[0], square.corners[1], square.corners[2]] {
-            unreached[c as usize] = true;
+            flags[c as usize] = true;
         }
+        let unreached = Unreached::new(&mesh, flags);
         let lit = Rgb::splat(0.3);
         let mut at_corners = vec![Rgb::ZERO; mesh.positions.len()];
         extrapolate_unreached(&mesh, &unreached, &mut at_corners, &[lit, lit]);
