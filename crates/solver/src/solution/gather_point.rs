@@ -25,7 +25,40 @@ pub(super) struct GatherPoint {
     /// Up to four points, one in each patch that uses the corner where its light is read
     /// ([`corner_reading_point`]; the centroid itself for a centroid): rays start from them
     /// in turn, so a corner on a contact line sees the mean of both sides.
-    pub(super) insides: Vec<DVec3>,
+    pub(super) insides: Insides,
+}
+
+/// The points a gather point's rays start from: up to four, held in place (a list on the heap
+/// for each of a million points cost as many allocations, made one at a time).
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Insides {
+    points: [DVec3; 4],
+    count: usize,
+}
+
+impl Insides {
+    /// Just `point`.
+    pub(super) fn one(point: DVec3) -> Insides {
+        let mut insides = Insides::default();
+        insides.push(point);
+        insides
+    }
+
+    /// Adds `point` where there is room for it.
+    fn push(&mut self, point: DVec3) {
+        if let Some(slot) = self.points.get_mut(self.count) {
+            *slot = point;
+            self.count += 1;
+        }
+    }
+}
+
+impl std::ops::Deref for Insides {
+    type Target = [DVec3];
+
+    fn deref(&self) -> &[DVec3] {
+        &self.points[..self.count]
+    }
 }
 
 impl GatherPoint {
@@ -40,13 +73,9 @@ impl GatherPoint {
                     limit: position + (patch.centroid - position) * LIMIT_INSET,
                     normal: patch.normal,
                     face: patch.face,
-                    insides: Vec::new(),
+                    insides: Insides::default(),
                 });
-                if corner.insides.len() < 4 {
-                    corner
-                        .insides
-                        .push(corner_reading_point(position, patch.centroid));
-                }
+                (corner.insides).push(corner_reading_point(position, patch.centroid));
             }
         }
         corners
@@ -78,7 +107,7 @@ impl GatherPoint {
                     limit: patch.centroid,
                     normal: patch.normal,
                     face: patch.face,
-                    insides: vec![patch.centroid],
+                    insides: Insides::one(patch.centroid),
                 })
             })
             .collect()

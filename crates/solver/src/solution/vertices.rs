@@ -911,7 +911,7 @@ mod tests {
     use crate::mesh::Mesh;
     use crate::sampling::Seed;
     use crate::scene::{Material, Rgb, Scene};
-    use crate::solution::gather_point::GatherPoint;
+    use crate::solution::gather_point::{GatherPoint, Insides};
     use crate::visibility::Occluders;
     use crate::{
         HierarchySettings, Method, PatchTarget, Progress, Session, SolveRequest, SolverSettings,
@@ -1057,7 +1057,7 @@ mod tests {
                     limit: at,
                     normal: DVec3::Y,
                     face: 0,
-                    insides: vec![at],
+                    insides: Insides::one(at),
                 }
             })
             .collect();
