@@ -624,7 +624,7 @@ struct Unreached {
     /// Per corner, whether it is one.
     corners: Vec<bool>,
     /// The patches with one or more of them, in order: each pass of the last bounces reads
-    /// these alone (on the monastery, a tenth of the patches), not the whole mesh.
+    /// these alone (on the monastery, 117,340 of 393,229 patches), not the whole mesh.
     patches: Vec<u32>,
 }
 
