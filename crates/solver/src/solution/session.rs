@@ -222,6 +222,19 @@ impl Session {
         request: &SolveRequest,
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<Session, SolveError> {
+        Session::hierarchical_keeping(scene, request, &BTreeSet::new(), progress)
+    }
+
+    /// [`Session::hierarchical`] for a session whose vertices will gather the light of
+    /// `lights` too (objects lit once and turned off since keep their place): the pairs past
+    /// the link budget are left to the vertices' gathers only where they will gather every
+    /// emitter among the scene's and these.
+    fn hierarchical_keeping(
+        scene: &Scene,
+        request: &SolveRequest,
+        lights: &BTreeSet<u32>,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<Session, SolveError> {
         let settings = request.hierarchy.unwrap_or_default();
         let request = &SolveRequest {
             hierarchy: Some(settings),
@@ -236,7 +249,8 @@ impl Session {
         seconds.mesh = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
         // Corners that gather every bounce read the leaves' system only as their solve's start.
-        let past_link_budget = match gathers_direct_light(scene, &lit_objects(scene)) {
+        let gathered: BTreeSet<u32> = lit_objects(scene).union(lights).copied().collect();
+        let past_link_budget = match gathers_direct_light(scene, &gathered) {
             true => PastLinkBudget::Deferred,
             false => PastLinkBudget::Sampled,
         };
@@ -577,7 +591,8 @@ impl Session {
                 // leaves, which viewers get as a new geometry.
                 let (seconds, lights) = (self.seconds, std::mem::take(&mut self.lights));
                 let epoch = self.terms_epoch;
-                *self = Session::hierarchical(&self.scene, &self.request, &no_progress)
+                let request = &self.request;
+                *self = Session::hierarchical_keeping(&self.scene, request, &lights, &no_progress)
                     .expect("this session's method already ran on a hierarchy");
                 (self.seconds, self.terms_epoch) = (seconds, epoch);
                 self.keep_lights(lights);
@@ -970,20 +985,23 @@ mod tests {
     use crate::mesh::PatchTarget;
     use crate::scene::Material;
 
-    #[test]
-    fn lighting_past_the_gathered_emitters_a_hierarchy_left_pairs_to_is_refused_by_name() {
-        // A lamp over 300 tiles: lit, the tiles would be 301 emitting faces, past the 256 the
-        // vertices gather, and the pairs the hierarchy left at its link budget would go dark.
+    /// 300 grey tiles (one object, emitting `tiles_emission`) under a lamp: lit, the tiles are
+    /// 300 emitting faces, past the 256 the vertices gather.
+    fn tiles_under_a_lamp(tiles_emission: Rgb) -> Scene {
         let mut scene = Scene::default();
         let grey = Material {
             reflectance: Rgb::splat(0.5),
             emission: Rgb::ZERO,
         };
         let tiles = scene.add_object("tiles");
+        let tile = Material {
+            emission: tiles_emission,
+            ..grey
+        };
         for (i, j) in (0..20).flat_map(|i| (0..15).map(move |j| (i, j))) {
             let o = DVec3::new(i as f64 * 0.1, 0.0, j as f64 * 0.1);
             let (x, z) = (DVec3::X * 0.1, DVec3::Z * 0.1);
-            scene.add_polygon(tiles, &[o, o + z, o + z + x, o + x], grey);
+            scene.add_polygon(tiles, &[o, o + z, o + z + x, o + x], tile);
         }
         let lamp = scene.add_object("lamp");
         let (o, x, z) = (DVec3::new(0.5, 1.0, 0.5), DVec3::X, DVec3::Z * 0.5);
@@ -992,15 +1010,27 @@ mod tests {
             ..grey
         };
         scene.add_polygon(lamp, &[o, o + x, o + x + z, o + z], lit);
-        let request = |max_links| SolveRequest {
+        scene
+    }
+
+    /// A hierarchy at knob 0.3 within `max_links` links.
+    fn within_links(max_links: usize) -> SolveRequest {
+        SolveRequest {
             hierarchy: Some(HierarchySettings {
                 error: 0.3,
                 max_links,
                 ..HierarchySettings::default()
             }),
             ..SolveRequest::default()
-        };
-        let mut left = Session::hierarchical(&scene, &request(10), &no_progress).unwrap();
+        }
+    }
+
+    #[test]
+    fn lighting_past_the_gathered_emitters_a_hierarchy_left_pairs_to_is_refused_by_name() {
+        // Lit, the tiles would be 301 emitting faces, and the pairs the hierarchy left at its
+        // link budget would go dark.
+        let scene = tiles_under_a_lamp(Rgb::ZERO);
+        let mut left = Session::hierarchical(&scene, &within_links(10), &no_progress).unwrap();
         let pairs = left.hierarchy_stats().unwrap().deferred_pairs;
         assert!(pairs > 0);
         let refused = left.set_emission("tiles", Rgb::ONE).unwrap_err();
@@ -1017,9 +1047,31 @@ mod tests {
                 .starts_with("lighting 'tiles' would bring")
         );
         assert!(left.set_emission("lamp", Rgb::splat(2.0)).is_ok());
-        let mut whole = Session::hierarchical(&scene, &request(10_000_000), &no_progress).unwrap();
+        let request = within_links(10_000_000);
+        let mut whole = Session::hierarchical(&scene, &request, &no_progress).unwrap();
         assert_eq!(whole.hierarchy_stats().unwrap().deferred_pairs, 0);
         assert!(whole.set_emission("tiles", Rgb::ONE).is_ok());
+    }
+
+    #[test]
+    fn lights_turned_off_keep_their_place_when_a_move_rebuilds_the_hierarchy() {
+        // Lit as loaded, the tiles are past the emitters the vertices gather: the hierarchy
+        // samples every pair into a link. Turned off and the lamp moved, the rebuilt hierarchy
+        // must still, or the tiles could never be lit again (and their gathers would miss the
+        // pairs it left).
+        let scene = tiles_under_a_lamp(Rgb::splat(0.5));
+        let mut session = Session::hierarchical(&scene, &within_links(10), &no_progress).unwrap();
+        assert_eq!(session.hierarchy_stats().unwrap().deferred_pairs, 0);
+        session.set_emission("tiles", Rgb::ZERO).unwrap();
+        session.solve(&no_progress);
+        session.move_object("lamp", DVec3::X * 0.2).unwrap();
+        assert_eq!(session.hierarchy_stats().unwrap().deferred_pairs, 0);
+        assert_eq!(session.set_emission("tiles", Rgb::splat(0.5)), Ok(()));
+        session.solve(&no_progress);
+        let tiles = (session.mesh().patches.iter())
+            .position(|p| p.object == 0)
+            .unwrap();
+        assert!(session.radiosity()[tiles].min_element() >= 0.5);
     }
 
     /// A closed unit cube whose floor and ceiling are separate lamps.
