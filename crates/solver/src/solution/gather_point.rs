@@ -210,7 +210,22 @@ impl<T: Send> PointRows<T> {
 /// its points with it (the leaves after display splits) gathers only the others.
 pub(super) struct GatheredAt<T> {
     rows: PointRows<T>,
-    by_point: HashMap<u128, u32>,
+    /// Each point's index by its fingerprint, in [`MAP_SHARDS`] maps.
+    by_point: Vec<HashMap<u128, u32>>,
+}
+
+/// Maps a [`GatheredAt`]'s points are spread over by their fingerprints' top bits (hashes,
+/// so evenly), each built on its own thread: one map of a million points was built on one
+/// core while the other idled, between each generation of display splits.
+const MAP_SHARDS: usize = 64;
+const _: () = assert!(
+    MAP_SHARDS.is_power_of_two(),
+    "a shard is a fingerprint's top bits"
+);
+
+/// The map of [`GatheredAt::by_point`] that holds `fingerprint`.
+fn map_shard(fingerprint: u128) -> usize {
+    (fingerprint >> (128 - MAP_SHARDS.trailing_zeros())) as usize
 }
 
 impl<T> GatheredAt<T> {
@@ -221,15 +236,22 @@ impl<T> GatheredAt<T> {
         let fingerprints: Vec<Option<u128>> = (points.par_iter())
             .map(|point| point.as_ref().map(GatherPoint::fingerprint))
             .collect();
-        let by_point = (fingerprints.into_iter().enumerate())
-            .filter_map(|(i, fingerprint)| Some((fingerprint?, i as u32)))
+        let mut shards: Vec<Vec<(u128, u32)>> = vec![Vec::new(); MAP_SHARDS];
+        for (i, fingerprint) in fingerprints.into_iter().enumerate() {
+            if let Some(fingerprint) = fingerprint {
+                shards[map_shard(fingerprint)].push((fingerprint, i as u32));
+            }
+        }
+        let by_point = (shards.into_par_iter())
+            .map(|shard| shard.into_iter().collect())
             .collect();
         GatheredAt { rows, by_point }
     }
 
     /// What `point` gathered, if it is one of the points.
     pub(super) fn at(&self, point: &GatherPoint) -> Option<&[T]> {
-        let i = *self.by_point.get(&point.fingerprint())? as usize;
+        let fingerprint = point.fingerprint();
+        let i = *self.by_point[map_shard(fingerprint)].get(&fingerprint)? as usize;
         Some(&self.rows.entries[self.rows.offsets[i] as usize..self.rows.offsets[i + 1] as usize])
     }
 }
