@@ -532,22 +532,42 @@ mod tests {
         }
     }
 
+    /// Three patches of reflectance 0.9 lit from the first: fewer than GMRES's restart, so its
+    /// Krylov space spans their whole space within one cycle.
+    struct ThreePatches {
+        transport: Matrix,
+        reflectance: [Rgb; 3],
+        emission: [Rgb; 3],
+    }
+
+    impl ThreePatches {
+        fn new() -> Self {
+            ThreePatches {
+                transport: Matrix(vec![
+                    vec![0.0, 0.5, 0.4],
+                    vec![0.3, 0.0, 0.6],
+                    vec![0.2, 0.7, 0.0],
+                ]),
+                reflectance: [Rgb::splat(0.9); 3],
+                emission: [Rgb::ONE, Rgb::ZERO, Rgb::ZERO],
+            }
+        }
+
+        fn system(&self) -> System<'_> {
+            System {
+                reflectance: &self.reflectance,
+                emission: &self.emission,
+                area: &[1.0; 3],
+            }
+        }
+    }
+
     #[test]
     fn the_estimates_read_between_gmres_iterations_move_from_the_start_to_the_answer() {
         // Worked out only when read, each estimate is the iterate at that point: the first is
         // the start (zero), the one after the first product has moved, the last is the answer.
-        let transport = Matrix(vec![
-            vec![0.0, 0.5, 0.4],
-            vec![0.3, 0.0, 0.6],
-            vec![0.2, 0.7, 0.0],
-        ]);
-        let reflectance = [Rgb::splat(0.9); 3];
-        let emission = [Rgb::ONE, Rgb::ZERO, Rgb::ZERO];
-        let system = System {
-            reflectance: &reflectance,
-            emission: &emission,
-            area: &[1.0; 3],
-        };
+        let patches = ThreePatches::new();
+        let (transport, system) = (&patches.transport, patches.system());
         let read = std::sync::Mutex::new(Vec::new());
         let progress = |p: Progress| {
             if let Progress::Estimate { radiosity } = p {
@@ -558,7 +578,7 @@ mod tests {
             tolerance: 1e-10,
             ..SolverSettings::default()
         };
-        let answer = solve(&transport, &system, &settings, None, &progress).unwrap();
+        let answer = solve(transport, &system, &settings, None, &progress).unwrap();
         let read = read.into_inner().unwrap();
         assert!(read.len() >= 3, "{} estimates", read.len());
         assert_eq!(read[0], vec![Rgb::ZERO; 3]);
@@ -569,25 +589,15 @@ mod tests {
     #[test]
     fn gmres_is_exact_within_one_cycle_on_a_small_system_and_jacobi_takes_rho_to_the_k() {
         // n = 3 < the restart length: GMRES's Krylov space spans the whole space in 3 steps.
-        let transport = Matrix(vec![
-            vec![0.0, 0.5, 0.4],
-            vec![0.3, 0.0, 0.6],
-            vec![0.2, 0.7, 0.0],
-        ]);
-        let reflectance = [Rgb::splat(0.9); 3];
-        let emission = [Rgb::ONE, Rgb::ZERO, Rgb::ZERO];
-        let system = System {
-            reflectance: &reflectance,
-            emission: &emission,
-            area: &[1.0; 3],
-        };
+        let patches = ThreePatches::new();
+        let (transport, system) = (&patches.transport, patches.system());
         let run = |method| {
             let settings = SolverSettings {
                 method,
                 tolerance: 1e-10,
                 ..SolverSettings::default()
             };
-            solve(&transport, &system, &settings, None, &crate::no_progress).unwrap()
+            solve(transport, &system, &settings, None, &crate::no_progress).unwrap()
         };
         let (gmres, jacobi) = (run(Method::Gmres), run(Method::Jacobi));
         assert!(gmres.iterations <= 3, "{}", gmres.iterations);
