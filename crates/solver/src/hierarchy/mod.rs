@@ -303,11 +303,15 @@ impl Hierarchy {
         max_leaves: usize,
     ) {
         self.tree.collect_leaves();
-        self.reach.measure(&self.tree, occluders);
+        let unmeasured = self.reach.unmeasured(&self.tree);
+        self.reach
+            .measure_leaves(&self.tree, &unmeasured, occluders);
         // Each round splits every straddling leaf it may, so only the pieces it made can
         // straddle in the next: they alone are measured and looked at, and the leaves are
-        // listed and their reached areas summed once, at the end.
-        let (mut candidates, mut leaf_count) = (self.tree.leaves.clone(), self.tree.leaves.len());
+        // listed again (where a round split some) and their reached areas summed once, at
+        // the end.
+        let listed = self.tree.leaves.len();
+        let (mut candidates, mut leaf_count) = (self.tree.leaves.clone(), listed);
         loop {
             let straddling: Vec<u32> = (candidates.into_iter())
                 .filter(|&n| {
@@ -330,7 +334,9 @@ impl Hierarchy {
             self.reach
                 .measure_leaves(&self.tree, &candidates, occluders);
         }
-        self.tree.collect_leaves();
+        if leaf_count != listed {
+            self.tree.collect_leaves();
+        }
         self.reach.sum_reached_area(&self.tree);
         self.index_links_and_slopes();
     }

@@ -62,11 +62,15 @@ fn a_face_crosses(patch: &Patch, insets: &[DVec3], radius: f64, occluders: &Occl
 impl Reach {
     /// Measures the leaves of `tree` not measured yet and sums the reached area up the trees.
     pub(super) fn measure(&mut self, tree: &Tree, occluders: &Occluders) {
-        let unmeasured: Vec<u32> = (tree.leaves.iter().copied())
-            .filter(|&n| self.seen_share.get(n as usize).is_none_or(|s| s.is_nan()))
-            .collect();
-        self.measure_leaves(tree, &unmeasured, occluders);
+        self.measure_leaves(tree, &self.unmeasured(tree), occluders);
         self.sum_reached_area(tree);
+    }
+
+    /// The leaves of `tree` not measured yet.
+    pub(super) fn unmeasured(&self, tree: &Tree) -> Vec<u32> {
+        (tree.leaves.iter().copied())
+            .filter(|&n| self.seen_share.get(n as usize).is_none_or(|s| s.is_nan()))
+            .collect()
     }
 
     /// Measures the leaves `leaves` of `tree`: their reached share, whether they straddle the

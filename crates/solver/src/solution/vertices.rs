@@ -323,10 +323,7 @@ impl CornerLight {
         (mut corners, centroids): (Vec<Option<GatherPoint>>, &[Option<GatherPoint>]),
         progress: &(dyn Fn(Progress) + Sync),
     ) {
-        for (point, &unreached) in corners
-            .iter_mut()
-            .zip(&self.unreached_corners(mesh).corners)
-        {
+        for (point, unreached) in corners.iter_mut().zip(self.unreached_corners(mesh)) {
             if unreached {
                 *point = None;
             }
@@ -371,7 +368,7 @@ impl CornerLight {
         let face_emission = face_emission(mesh, emission);
         // Corners that light reaches from none of their patches take each field's value from
         // their patches' centroids (`extrapolate_unreached`).
-        let unreached = self.unreached_corners(mesh);
+        let unreached = Unreached::new(mesh, self.unreached_corners(mesh));
         let mut direct = self.corners.read(&face_emission);
         let centre_direct = self.centres.read(&face_emission);
         extrapolate_unreached(mesh, &unreached, &mut direct, &centre_direct);
@@ -449,16 +446,16 @@ impl CornerLight {
         self.gathered && self.indirect == CornerIndirect::Gathered && self.bounce.is_some()
     }
 
-    /// The corners of `mesh` light reaches from none of the patches that use them (inside a
-    /// wall their face runs into: all their gathers read there is the wall's inside).
-    fn unreached_corners(&self, mesh: &Mesh) -> Unreached {
+    /// Per corner of `mesh`, whether light reaches it from none of the patches that use it
+    /// (inside a wall its face runs into: all its gathers read there is the wall's inside).
+    fn unreached_corners(&self, mesh: &Mesh) -> Vec<bool> {
         let mut unreached = vec![true; mesh.positions.len()];
         for (patch, slots) in mesh.patches.iter().zip(&self.reached) {
             for (&c, &reached) in patch.corners[..patch.corner_count()].iter().zip(slots) {
                 unreached[c as usize] &= !reached;
             }
         }
-        Unreached::new(mesh, unreached)
+        unreached
     }
 
     /// Per patch of `mesh` under the patches' `emission`, how far the direct light its centroid
