@@ -958,7 +958,14 @@ mod tests {
     #[test]
     fn a_vertex_under_a_rectangular_lamp_gathers_howells_factor_exactly() {
         // A 2 x 2 floor meshed at 0.5 (a vertex at (1, 0, 1)) under a 0.6 x 0.4 lamp whose
-        // corner is 0.5 above that vertex.
+        // corner is 0.5 above that vertex; the floor one quad, or two triangles of soup whose
+        // diagonal runs through the vertex (a corner of each there, gathered apart).
+        for split_floor in [false, true] {
+            vertex_under_a_rectangular_lamp(split_floor);
+        }
+    }
+
+    fn vertex_under_a_rectangular_lamp(split_floor: bool) {
         let mut scene = Scene::default();
         let floor = Material {
             reflectance: Rgb::new(0.5, 0.25, 0.125),
@@ -969,23 +976,29 @@ mod tests {
             emission: Rgb::splat(10.0),
         };
         let (x, z) = (DVec3::X, DVec3::Z);
-        add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z * 2.0, x * 2.0), floor);
+        if split_floor {
+            let object = scene.add_object("floor");
+            let (o, far) = (DVec3::ZERO, (x + z) * 2.0);
+            scene.add_polygon(object, &[o, z * 2.0, far], floor);
+            scene.add_polygon(object, &[o, far, x * 2.0], floor);
+        } else {
+            add_parallelogram(&mut scene, "floor", (DVec3::ZERO, z * 2.0, x * 2.0), floor);
+        }
         add_parallelogram(
             &mut scene,
             "lamp",
             (dvec3(1.0, 0.5, 1.0), x * 0.6, z * 0.4),
             lamp,
         );
+        let lamp_face = scene.faces.len() - 1;
         let expected = 10.0 * howell_b3(0.6, 0.4, 0.5);
         for hierarchical in [false, true] {
             let solved = solve_scene(scene.clone(), &request(hierarchical), &crate::no_progress)
                 .expect("solves");
-            let corner = solved
-                .mesh
-                .positions
-                .iter()
-                .position(|p| p.distance(dvec3(1.0, 0.0, 1.0)) < 1e-12)
-                .expect("a floor vertex under the lamp's corner");
+            let corners: Vec<usize> = (0..solved.mesh.positions.len())
+                .filter(|&c| solved.mesh.positions[c].distance(dvec3(1.0, 0.0, 1.0)) < 1e-12)
+                .collect();
+            assert_eq!(corners.len(), 1 + usize::from(split_floor));
             let occluders = Occluders::new(&scene);
             let reached = super::reached_corners(&solved.mesh, &occluders, Seed::default());
             let light = CornerLight::new(
@@ -997,13 +1010,17 @@ mod tests {
                 Seed::default(),
                 &no_progress,
             );
-            let face_emission = [Rgb::ZERO, Rgb::splat(10.0)];
-            let got = light.corners.read(&face_emission)[corner];
-            println!("hierarchical {hierarchical}: {got} W/m^2 against Howell B-3 {expected}");
-            assert!(
-                ((got - Rgb::splat(expected)).abs() / expected).max_element() < 1e-5,
-                "hierarchical {hierarchical}: {got} against Howell B-3 {expected}"
-            );
+            let mut face_emission = vec![Rgb::ZERO; scene.faces.len()];
+            face_emission[lamp_face] = Rgb::splat(10.0);
+            let direct = light.corners.read(&face_emission);
+            for corner in corners {
+                let got = direct[corner];
+                println!("hierarchical {hierarchical}: {got} W/m^2 against Howell B-3 {expected}");
+                assert!(
+                    ((got - Rgb::splat(expected)).abs() / expected).max_element() < 1e-5,
+                    "hierarchical {hierarchical}, split {split_floor}: {got} against {expected}"
+                );
+            }
         }
     }
 
