@@ -444,9 +444,9 @@ impl Hierarchy {
     ) -> Result<BuiltHierarchy, NeedsEntries> {
         let name = format!("cluster tree over {} faces", scene.faces.len());
         progress(Progress::Stage { name: &name });
+        let run = Rounds::new(scene, occluders, settings, rays, solver, progress);
         let mut unrefined = Hierarchy::cluster_tree(scene);
-        let finest = finest_radius(scene, settings.max_leaves);
-        unrefined.reach = Reach::spaced(finest * REACH_TEST_SPACING);
+        unrefined.reach = Reach::spaced(run.finest_radius * REACH_TEST_SPACING);
         unrefined.past_link_budget = past_link_budget;
         unrefined.tree.collect_leaves();
         progress(Progress::Stage {
@@ -466,7 +466,6 @@ impl Hierarchy {
             .collect();
         // The leaves are collected and measured above: only the link operator is left.
         unrefined.index_links_and_slopes();
-        let run = Rounds::new(scene, occluders, settings, rays, solver, progress);
         run.refine(unrefined, settings.error, settings.budget(), None)
     }
 
