@@ -5,8 +5,8 @@ use super::display::{Displayed, split_where_direct_light_curves};
 use super::report::{ObjectRadiosity, SolveReport, StageSeconds};
 use super::request::{SolveError, SolveRequest, check_dense_size};
 use super::vertices::{
-    CornerIndirect, CornerLight, MAX_GATHERED_EMITTERS, clamp_below_zero, gathers_direct_light,
-    reached_corners,
+    CornerIndirect, CornerLight, MAX_GATHERED_EMITTERS, MAX_GATHERED_EMITTING_FACES,
+    clamp_below_zero, gathers_direct_light, reached_corners,
 };
 use crate::check::{CheckSettings, Estimate};
 use crate::form_factors::{DenseFormFactors, UpdateStats};
@@ -130,12 +130,14 @@ pub enum EditError {
     /// [`crate::scene::MAX_COORDINATE`].
     #[error("{0}")]
     InvalidMove(String),
-    /// A light that would stop the corners gathering ([`MAX_GATHERED_EMITTERS`] emitting
-    /// faces at most) on a hierarchy whose pairs past its link budget were left to them.
+    /// A light that would stop the corners gathering ([`MAX_GATHERED_EMITTERS`] emitters of
+    /// [`MAX_GATHERED_EMITTING_FACES`] faces at most) on a hierarchy whose pairs past its link
+    /// budget were left to them.
     #[error(
-        "lighting '{object}' would bring the emitting faces past the {MAX_GATHERED_EMITTERS} \
-         the vertices gather, and this hierarchy left {pairs} pairs at its link budget to \
-         their gathers: solve the scene with that light on, or with a larger --max-links"
+        "lighting '{object}' would bring the emitters past the {MAX_GATHERED_EMITTERS} (of \
+         {MAX_GATHERED_EMITTING_FACES} faces) the vertices gather, and this hierarchy left \
+         {pairs} pairs at its link budget to their gathers: solve the scene with that light \
+         on, or with a larger --max-links"
     )]
     PastGatheredEmitters {
         /// The object the edit would light.
@@ -985,8 +987,8 @@ mod tests {
     use crate::mesh::PatchTarget;
     use crate::scene::Material;
 
-    /// 300 grey tiles (one object, emitting `tiles_emission`) under a lamp: lit, the tiles are
-    /// 300 emitting faces, past the 256 the vertices gather.
+    /// 65 x 64 grey tiles (one object, emitting `tiles_emission`) under a lamp: lit, the tiles
+    /// are 4,160 emitting faces, past the 4,096 the vertices gather.
     fn tiles_under_a_lamp(tiles_emission: Rgb) -> Scene {
         let mut scene = Scene::default();
         let grey = Material {
@@ -998,7 +1000,7 @@ mod tests {
             emission: tiles_emission,
             ..grey
         };
-        for (i, j) in (0..20).flat_map(|i| (0..15).map(move |j| (i, j))) {
+        for (i, j) in (0..65).flat_map(|i| (0..64).map(move |j| (i, j))) {
             let o = DVec3::new(i as f64 * 0.1, 0.0, j as f64 * 0.1);
             let (x, z) = (DVec3::X * 0.1, DVec3::Z * 0.1);
             scene.add_polygon(tiles, &[o, o + z, o + z + x, o + x], tile);
@@ -1027,7 +1029,7 @@ mod tests {
 
     #[test]
     fn lighting_past_the_gathered_emitters_a_hierarchy_left_pairs_to_is_refused_by_name() {
-        // Lit, the tiles would be 301 emitting faces, and the pairs the hierarchy left at its
+        // Lit, the tiles would be 4,161 emitting faces, and the pairs the hierarchy left at its
         // link budget would go dark.
         let scene = tiles_under_a_lamp(Rgb::ZERO);
         let mut left = Session::hierarchical(&scene, &within_links(10), &no_progress).unwrap();
