@@ -4,7 +4,7 @@ mod common;
 
 use common::*;
 use glam::dvec3;
-use solver::accuracy::evaluate;
+use solver::accuracy::{check_probes_match, evaluate};
 use solver::reference::{Probe, place_probes, trace_probes};
 use solver::visibility::Occluders;
 use solver::{Method, PatchTarget, Rgb, SolveRequest, SolverSettings, solve_scene};
@@ -392,4 +392,44 @@ fn probes_inside_a_solid_count_and_are_also_counted_apart() {
     // Off by 2 on every channel at the buried probes, against 2 at every visible one.
     let expected = (buried as f64 / (400 - buried) as f64).sqrt();
     assert!((error.smooth.rms - expected).abs() < 1e-12, "{error:?}");
+}
+
+#[test]
+fn a_reference_traced_for_another_scene_is_refused_naming_a_probe() {
+    let scene = parallel_plates(1.0, 1.0, 1.0, grey(0.5, 0.0), grey(0.0, 4.0));
+    let probes = trace(&scene, 20, 16, 1);
+    assert_eq!(check_probes_match(&scene, &probes), Ok(()));
+    // The same faces in another order, as a file with a face added before them numbers
+    // every later face anew: each probe names a face that lies elsewhere.
+    let mut reordered = scene.clone();
+    reordered.faces.reverse();
+    for (i, face) in reordered.faces.iter_mut().enumerate() {
+        face.source = i as u32;
+    }
+    let refused = check_probes_match(&reordered, &probes).unwrap_err();
+    let first = &probes[0];
+    assert_eq!(first.object, "receiver");
+    assert_eq!(
+        refused,
+        format!(
+            "probe 0 at {:?} lies on face 0 of object 'receiver' where the reference was \
+             traced, but here that face is of object 'emitter', 1.000e0 from the probe: the \
+             reference was traced for another scene (trace one for this scene with `radcast \
+             reference`)",
+            first.position
+        )
+    );
+    // A probe moved off its face, and one naming a face the scene lacks.
+    let mut moved = probes.clone();
+    moved[3].position[2] += 0.5;
+    let refused = check_probes_match(&scene, &moved).unwrap_err();
+    assert!(refused.starts_with("probe 3 at "), "{refused}");
+    assert!(
+        refused.contains("that face lies 5.000e-1 from the probe"),
+        "{refused}"
+    );
+    let mut missing = probes;
+    missing[5].face = 7;
+    let refused = check_probes_match(&scene, &missing).unwrap_err();
+    assert!(refused.contains("that face does not exist"), "{refused}");
 }

@@ -2,7 +2,7 @@
 
 use crate::{HEAP, ProgressPrinter};
 use anyhow::Context;
-use solver::accuracy::{SolutionError, evaluate};
+use solver::accuracy::{SolutionError, check_probes_match, evaluate};
 use solver::args::{SolveArgs, budget_warnings};
 use solver::check::{CheckSettings, Estimate, ReadingEstimate, self_check};
 use solver::reference::Reference;
@@ -41,23 +41,28 @@ impl SolveCommand {
         let request = settings.request().map_err(anyhow::Error::msg)?;
         let printer = ProgressPrinter::new();
         let reference = reference
-            .map(|path| -> anyhow::Result<Reference> {
+            .map(|path| -> anyhow::Result<(PathBuf, Reference)> {
                 let text = std::fs::read_to_string(&path)
                     .with_context(|| format!("{}: cannot read", path.display()))?;
-                serde_json::from_str(&text)
-                    .with_context(|| format!("{}: not a radcast reference", path.display()))
+                let parsed = serde_json::from_str(&text)
+                    .with_context(|| format!("{}: not a radcast reference", path.display()))?;
+                Ok((path, parsed))
             })
             .transpose()?;
         let mut solved = solve_file(&scene, &request, &|p| printer.report(p))?;
-        let measured = reference.map(|r| {
-            evaluate(
-                &solved.scene,
-                &solved.mesh,
-                &solved.radiosity,
-                &solved.vertex_radiosity,
-                &r.probes,
-            )
-        });
+        let measured = reference
+            .map(|(path, r)| {
+                check_probes_match(&solved.scene, &r.probes)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+                Ok::<_, anyhow::Error>(evaluate(
+                    &solved.scene,
+                    &solved.mesh,
+                    &solved.radiosity,
+                    &solved.vertex_radiosity,
+                    &r.probes,
+                ))
+            })
+            .transpose()?;
         // A solve to a target has checked its last step already.
         if settings.checked() && solved.report.estimate.is_none() {
             solved.report.estimate = Some(self_check(

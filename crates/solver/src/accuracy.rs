@@ -129,6 +129,52 @@ fn locate(
     }
 }
 
+/// How far a probe may lie from the face it names, relative to the scene's diagonal: its
+/// position makes JSON's exact round trip, and the pieces loading cuts its face into cover it.
+const PROBE_OFF_FACE: f64 = 1e-9;
+
+/// `Err` naming the first of `probes` that does not lie on the face and object it names in
+/// `scene`: they were traced for another scene (a face added before it shifts every later
+/// face's number), and read here they would measure other faces' light.
+pub fn check_probes_match(scene: &Scene, probes: &[Probe]) -> Result<(), String> {
+    let pieces = pieces_by_source(scene);
+    let diagonal = scene.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length());
+    let off = |probe: &Probe| {
+        let p = DVec3::from(probe.position);
+        let on_face = pieces.get(probe.face as usize).into_iter().flatten();
+        let distance = on_face
+            .map(|&f| scene.faces[f as usize].polygon.closest_point(p).distance(p))
+            .fold(f64::INFINITY, f64::min);
+        let object = (pieces.get(probe.face as usize))
+            .and_then(|p| p.first())
+            .map(|&f| &scene.objects[scene.faces[f as usize].object as usize].name);
+        let on_face = distance <= PROBE_OFF_FACE * diagonal;
+        (!on_face || object != Some(&probe.object)).then_some((distance, object))
+    };
+    match probes
+        .iter()
+        .enumerate()
+        .find_map(|(i, p)| off(p).map(|o| (i, p, o)))
+    {
+        None => Ok(()),
+        Some((index, probe, (distance, object))) => {
+            let here = match object {
+                None => "does not exist".to_string(),
+                Some(name) if *name != probe.object => {
+                    format!("is of object '{name}', {distance:.3e} from the probe")
+                }
+                Some(_) => format!("lies {distance:.3e} from the probe"),
+            };
+            Err(format!(
+                "probe {index} at {:?} lies on face {} of object '{}' where the reference was \
+                 traced, but here that face {here}: the reference was traced for another \
+                 scene (trace one for this scene with `radcast reference`)",
+                probe.position, probe.face, probe.object,
+            ))
+        }
+    }
+}
+
 /// The scene faces each face of the scene file was cut into ([`crate::scene::Face::source`]).
 fn pieces_by_source(scene: &Scene) -> Vec<Vec<u32>> {
     let mut pieces = vec![Vec::new(); scene.source_face_count()];

@@ -3,7 +3,7 @@
 
 use anyhow::{Context, bail};
 use plotters::prelude::*;
-use solver::accuracy::{SolutionError, evaluate};
+use solver::accuracy::{SolutionError, check_probes_match, evaluate};
 use solver::reference::Reference;
 use solver::{
     FormFactorSettings, HierarchySettings, Method, PatchTarget, Scene, SolveRequest,
@@ -97,6 +97,8 @@ pub fn run(
         let start = Instant::now();
         let scene = solver::load_scene(scene_path)?;
         let load = start.elapsed().as_secs_f64();
+        check_probes_match(&scene, &reference.probes)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", reference_path(scene_path).display()))?;
         for request in configurations(sweep) {
             let row = measure(scene_path, &scene, load, &request, sweep.repeat, &reference)?;
             rows.push(row);
