@@ -836,13 +836,8 @@ fn seen_share(
     let drawn = EmitterPoints::for_corner(corner, emitter);
     visible_share(budget, drawn.penumbra_rays(budget), |k| {
         let inside = k as usize % corner.insides.len();
-        let (target, weight) = drawn.point(corner, emitter, inside, (k, seed));
-        let ends = (corner.insides[inside], target);
-        Some((
-            weight,
-            occluders.segment_is_clear(ends.0, ends.1, ignored(corner, emitter)),
-        ))
-        .filter(|_| weight > 0.0 && target.is_finite())
+        let drawn_point = drawn.point(corner, emitter, inside, (k, seed));
+        shadow_ray((corner, inside), emitter, occluders, drawn_point)
     })
 }
 
@@ -880,18 +875,24 @@ fn group_seen_share(
         let inside = k as usize % corner.insides.len();
         let (target, weight) = points.point(corner, emitter, inside, (k, seed));
         let weight = weight * points.measure(emitter) / unoccluded[face];
-        let ends = (corner.insides[inside], target);
-        Some((
-            weight,
-            occluders.segment_is_clear(ends.0, ends.1, ignored(corner, emitter)),
-        ))
-        .filter(|_| weight > 0.0 && weight.is_finite() && target.is_finite())
+        shadow_ray((corner, inside), emitter, occluders, (target, weight))
     })
 }
 
-/// The faces a shadow ray from `corner` to `emitter` passes through: their own.
-fn ignored(corner: &GatherPoint, emitter: &Emitter) -> [u32; 2] {
-    [corner.face, emitter.face]
+/// The shadow ray from the corner's `inside`-th start to `target` on `emitter`: its `weight`
+/// and whether it is clear. `None`, and no ray, where the point lies below the corner's
+/// horizon: it contributes nothing and has no vote.
+fn shadow_ray(
+    (corner, inside): (&GatherPoint, usize),
+    emitter: &Emitter,
+    occluders: &Occluders,
+    (target, weight): (DVec3, f64),
+) -> Option<(f64, bool)> {
+    (weight > 0.0 && weight.is_finite() && target.is_finite()).then(|| {
+        let origin = corner.insides[inside];
+        let clear = occluders.segment_is_clear(origin, target, [corner.face, emitter.face]);
+        (weight, clear)
+    })
 }
 
 /// The weighted share of clear rays: `ray(k)` casts the `k`-th ray and gives its weight and
