@@ -43,6 +43,14 @@ impl ReferenceCommand {
     }
 }
 
+/// The reference file at `path`, its errors naming it.
+pub fn read_reference(path: &Path) -> anyhow::Result<Reference> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a radcast reference", path.display()))
+}
+
 /// Path-traces `probes` probes of the scene at `path`, `samples` paths each, and writes the
 /// reference to `out` (its folder made first); returns it.
 pub fn write_reference(

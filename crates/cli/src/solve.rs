@@ -1,5 +1,6 @@
 //! `radcast solve`: one solve, its summary (or JSON) and its error against a reference.
 
+use crate::reference::read_reference;
 use crate::{HEAP, ProgressPrinter};
 use anyhow::Context;
 use solver::accuracy::{SolutionError, check_probes_match, evaluate};
@@ -42,10 +43,7 @@ impl SolveCommand {
         let printer = ProgressPrinter::new();
         let reference = reference
             .map(|path| -> anyhow::Result<(PathBuf, Reference)> {
-                let text = std::fs::read_to_string(&path)
-                    .with_context(|| format!("{}: cannot read", path.display()))?;
-                let parsed = serde_json::from_str(&text)
-                    .with_context(|| format!("{}: not a radcast reference", path.display()))?;
+                let parsed = read_reference(&path)?;
                 Ok((path, parsed))
             })
             .transpose()?;

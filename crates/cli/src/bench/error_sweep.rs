@@ -57,10 +57,7 @@ pub fn load_reference(scene: &Path) -> anyhow::Result<Reference> {
         );
         return crate::reference::write_reference(scene, probes, samples, 1, &path);
     }
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a radcast reference", path.display()))
+    crate::reference::read_reference(&path)
 }
 
 /// The configurations a sweep runs.
