@@ -144,8 +144,8 @@ pub fn check_probes_match(scene: &Scene, probes: &[Probe]) -> Result<(), String>
     let diagonal = scene.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length());
     let off = |probe: &Probe| {
         let p = DVec3::from(probe.position);
-        let on_face = pieces.get(probe.face as usize).into_iter().flatten();
-        let distance = on_face
+        let face_pieces = pieces.get(probe.face as usize).into_iter().flatten();
+        let distance = face_pieces
             .map(|&f| scene.faces[f as usize].polygon.closest_point(p).distance(p))
             .fold(f64::INFINITY, f64::min);
         let object = (pieces.get(probe.face as usize))

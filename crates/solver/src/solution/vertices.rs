@@ -780,13 +780,12 @@ fn seen_factors(
                 .collect()
         })
         .collect();
-    let group_factor = |faces: &Vec<f64>| faces.iter().sum::<f64>();
-    let total: f64 = (unoccluded.iter().zip(groups))
-        .map(|(f, g)| group_factor(f) * g.brightness)
+    let group_factors: Vec<f64> = unoccluded.iter().map(|f| f.iter().sum()).collect();
+    let total: f64 = (group_factors.iter().zip(groups))
+        .map(|(f, g)| f * g.brightness)
         .sum();
-    (groups.iter().zip(&unoccluded))
-        .filter_map(|(g, faces)| {
-            let f = group_factor(faces);
+    (groups.iter().zip(&unoccluded).zip(&group_factors))
+        .filter_map(|((g, faces), &f)| {
             if f <= 0.0 {
                 return None;
             }
@@ -865,13 +864,20 @@ fn group_seen_share(
         .collect();
     let total = running.last().copied().unwrap_or(0.0);
     let start = unit_interval(splitmix64(seed));
-    let mut drawn: Vec<Option<EmitterPoints>> = group.faces.iter().map(|_| None).collect();
+    // The draws of the faces picked so far: a corner's rays pick at most their number of a
+    // group's hundreds of faces.
+    let mut drawn: Vec<(usize, EmitterPoints)> = Vec::new();
     visible_share(budget, budget.penumbra, |k| {
         let picked = (start + f64::from(k) * GOLDEN).fract() * total;
         let face = running.partition_point(|&sum| sum <= picked);
         let face = face.min(running.len() - 1);
         let emitter = &group.faces[face];
-        let points = drawn[face].get_or_insert_with(|| EmitterPoints::for_corner(corner, emitter));
+        let known = drawn.iter().position(|(f, _)| *f == face);
+        let place = known.unwrap_or_else(|| {
+            drawn.push((face, EmitterPoints::for_corner(corner, emitter)));
+            drawn.len() - 1
+        });
+        let points = &drawn[place].1;
         let inside = k as usize % corner.insides.len();
         let (target, weight) = points.point(corner, emitter, inside, (k, seed));
         let weight = weight * points.measure(emitter) / unoccluded[face];
