@@ -7,7 +7,9 @@
 //! (seed, probe index), so the result is the same for any thread count.
 
 use crate::Progress;
-use crate::sampling::{SphericalPolygon, cosine_direction, onto_plane, unit_interval};
+use crate::sampling::{
+    SphericalPolygon, cosine_direction, onto_plane, pick, running_sums, unit_interval,
+};
 use crate::scene::{Rgb, Scene};
 use crate::visibility::Occluders;
 use glam::DVec3;
@@ -59,23 +61,6 @@ pub struct Reference {
 
 fn uniform(rng: &mut Pcg64Mcg) -> f64 {
     unit_interval(rng.next_u64())
-}
-
-/// Chooses an index with probability proportional to `weights` through their running sums.
-fn pick(cumulative: &[f64], u: f64) -> usize {
-    let target = u * cumulative.last().copied().unwrap_or(0.0);
-    cumulative
-        .partition_point(|&c| c <= target)
-        .min(cumulative.len().saturating_sub(1))
-}
-
-fn running_sums(values: impl Iterator<Item = f64>) -> Vec<f64> {
-    values
-        .scan(0.0, |sum, v| {
-            *sum += v;
-            Some(*sum)
-        })
-        .collect()
 }
 
 /// `count` points spread uniformly by area over the scene's faces that do not emit: the error

@@ -43,6 +43,25 @@ pub fn unit_interval(bits: u64) -> f64 {
     (bits >> 11) as f64 / (1u64 << 53) as f64
 }
 
+/// Chooses an index with probability proportional to the weights whose running sums are
+/// `cumulative` ([`running_sums`]), from a uniform `u` in [0, 1).
+pub fn pick(cumulative: &[f64], u: f64) -> usize {
+    let target = u * cumulative.last().copied().unwrap_or(0.0);
+    cumulative
+        .partition_point(|&c| c <= target)
+        .min(cumulative.len().saturating_sub(1))
+}
+
+/// The running sums of `values`, for [`pick`].
+pub fn running_sums(values: impl Iterator<Item = f64>) -> Vec<f64> {
+    values
+        .scan(0.0, |sum, v| {
+            *sum += v;
+            Some(*sum)
+        })
+        .collect()
+}
+
 /// The k-th point of Roberts' R2 sequence, rotated by `offset` (Cranley-Patterson), kept off the
 /// patch border so that a ray never starts on a shared edge.
 pub fn stratified_uv(k: u32, offset: u64) -> (f64, f64) {

@@ -24,7 +24,8 @@ use crate::Progress;
 use crate::geometry::{Polygon, point_to_polygon_form_factor};
 use crate::mesh::{Mesh, Patch, corner_reading_point};
 use crate::sampling::{
-    Seed, SphericalPolygon, onto_plane, roberts_point, splitmix64, stratified_uv, unit_interval,
+    Seed, SphericalPolygon, onto_plane, pick, roberts_point, running_sums, splitmix64,
+    stratified_uv, unit_interval,
 };
 use crate::scene::{Face, Rgb, Scene};
 use crate::solve::{SolverSettings, System, solve_unclamped};
@@ -856,21 +857,13 @@ fn group_seen_share(
 ) -> f64 {
     // Weyl's sequence of the golden ratio: the most evenly spread in one dimension.
     const GOLDEN: f64 = 0.618_033_988_749_894_9;
-    let running: Vec<f64> = (unoccluded.iter())
-        .scan(0.0, |sum, f| {
-            *sum += f;
-            Some(*sum)
-        })
-        .collect();
-    let total = running.last().copied().unwrap_or(0.0);
+    let running = running_sums(unoccluded.iter().copied());
     let start = unit_interval(splitmix64(seed));
     // The draws of the faces picked so far: a corner's rays pick at most their number of a
     // group's hundreds of faces.
     let mut drawn: Vec<(usize, EmitterPoints)> = Vec::new();
     visible_share(budget, budget.penumbra, |k| {
-        let picked = (start + f64::from(k) * GOLDEN).fract() * total;
-        let face = running.partition_point(|&sum| sum <= picked);
-        let face = face.min(running.len() - 1);
+        let face = pick(&running, (start + f64::from(k) * GOLDEN).fract());
         let emitter = &group.faces[face];
         let known = drawn.iter().position(|(f, _)| *f == face);
         let place = known.unwrap_or_else(|| {
